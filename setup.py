@@ -1,0 +1,39 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'wifi_place_recognition'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages',
+            ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/models', glob('models/*.npz')),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/launch', glob('launch/*.py')),
+    ],
+    python_requires='>=3.10',
+    install_requires=['setuptools', 'numpy'],
+    extras_require={
+        'train': ['torch', 'scikit-learn'],
+        'test': ['pytest'],
+    },
+    zip_safe=True,
+    maintainer='wifi_place_recognition developers',
+    maintainer_email='dev@wifi-place-recognition.invalid',
+    description='Building and floor recognition from one WiFi scan '
+                '(SAE + classifier) with a ROS 2 node.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'train_model = wifi_place_recognition.train_model:main',
+            'evaluate_model = wifi_place_recognition.evaluate_model:main',
+            'classifier_node = wifi_place_recognition.classifier_node:main',
+            'replay_scans = wifi_place_recognition.replay_scans:main',
+        ],
+    },
+)

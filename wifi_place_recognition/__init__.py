@@ -1,0 +1,1 @@
+"""Building and floor recognition from one WiFi scan (SAE + classifier)."""

@@ -1,0 +1,157 @@
+"""
+The model file: a numpy ``.npz`` of float32 arrays plus a JSON header.
+
+Nothing in it is executable: arrays are read with ``allow_pickle=False``
+and the header is JSON stored as a uint8 array. A SHA-256 over the header
+and every array detects truncation, bit flips and tampering. Files are
+written atomically (temporary file, fsync, rename), so a crash mid-write
+leaves the previous file intact.
+"""
+
+import hashlib
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from .atomic import atomic_write
+from .model import ACTIVATIONS, Layer, PlaceModel
+from .preprocessing import RssiScaler, SCALINGS
+
+FORMAT = 'wifi_place_recognition/model'
+SCHEMA_VERSION = 1
+MAX_FILE_BYTES = 256 << 20
+MAX_UNPACKED_BYTES = 1 << 30
+
+
+class ModelFileError(ValueError):
+    """A model file that cannot be loaded; the message says why."""
+
+
+def _digest(header, arrays):
+    h = hashlib.sha256(json.dumps(header, sort_keys=True).encode())
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f'{name}|{a.dtype.str}|{a.shape}'.encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def save_model(model, path):
+    """Write ``model`` to ``path`` atomically."""
+    arrays = dict(model.scaler.arrays())
+    layers = []
+    for i, layer in enumerate(model.layers):
+        arrays[f'layer{i}.weight'] = layer.weight.astype(np.float32)
+        arrays[f'layer{i}.bias'] = layer.bias.astype(np.float32)
+        layers.append({'weight': f'layer{i}.weight',
+                       'bias': f'layer{i}.bias',
+                       'activation': layer.activation})
+    header = {'format': FORMAT, 'schema_version': SCHEMA_VERSION,
+              'ap_ids': list(model.ap_ids),
+              'classes': np.asarray(model.classes).tolist(),
+              'preprocessing': model.scaler.params(), 'layers': layers,
+              'provenance': model.provenance}
+    header['sha256'] = _digest(header, arrays)
+    arrays['header'] = np.frombuffer(json.dumps(header).encode(), np.uint8)
+    with atomic_write(path) as f:
+        np.savez(f, **arrays)
+
+
+def load_model(path):
+    """Load and fully validate a model file; raise :class:`ModelFileError`."""
+    path = Path(path)
+    try:
+        header, arrays = _read(path)
+        return _build(header, arrays)
+    except ModelFileError as exc:
+        raise ModelFileError(f'{path}: {exc}') from None
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelFileError(f'{path}: malformed model file ({exc})') from None
+
+
+def _read(path):
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise ModelFileError(f'cannot read: {exc.strerror}') from None
+    if size == 0:
+        raise ModelFileError('file is empty')
+    if size > MAX_FILE_BYTES:
+        raise ModelFileError(f'file is {size} bytes, more than a model '
+                             f'file may be ({MAX_FILE_BYTES})')
+    try:
+        with zipfile.ZipFile(path) as zf:
+            infos = zf.infolist()
+            if sum(i.file_size for i in infos) > MAX_UNPACKED_BYTES:
+                raise ModelFileError('unpacks to more than 1 GiB')
+            names = [i.filename for i in infos]
+            if not all(n.endswith('.npy') and '/' not in n for n in names):
+                raise ModelFileError('unexpected members in the archive')
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except ModelFileError:
+        raise
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError) as exc:
+        raise ModelFileError(f'not a model file, truncated or corrupt '
+                             f'({exc})') from None
+    except (OSError, ValueError) as exc:
+        raise ModelFileError(f'not a model file or corrupt ({exc})') from None
+    raw = arrays.pop('header', None)
+    if raw is None or raw.dtype != np.uint8 or raw.ndim != 1:
+        raise ModelFileError('no header: not a wifi_place_recognition model')
+    try:
+        header = json.loads(raw.tobytes().decode())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ModelFileError(f'header is not valid JSON ({exc})') from None
+    if not isinstance(header, dict) or header.get('format') != FORMAT:
+        raise ModelFileError('not a wifi_place_recognition model')
+    if header.get('schema_version') != SCHEMA_VERSION:
+        raise ModelFileError(f'schema version {header.get("schema_version")!r}'
+                             f' is not supported (this version reads '
+                             f'{SCHEMA_VERSION})')
+    expected = header.pop('sha256', None)
+    if expected != _digest(header, arrays):
+        raise ModelFileError('checksum mismatch: the file was modified or '
+                             'damaged')
+    return header, arrays
+
+
+def _build(header, arrays):
+    for name, a in arrays.items():
+        if a.dtype != np.float32:
+            raise ModelFileError(f'array {name} has dtype {a.dtype}, '
+                                 f'expected float32')
+    ap_ids = tuple(header['ap_ids'])
+    if not ap_ids or not all(isinstance(a, str) for a in ap_ids):
+        raise ModelFileError('ap_ids must be a non-empty list of strings')
+    if len(set(ap_ids)) != len(ap_ids):
+        raise ModelFileError('ap_ids has duplicates')
+    classes = np.asarray(header['classes'], dtype=np.int64)
+    if classes.ndim != 2 or classes.shape[1] != 2 or len(classes) < 1:
+        raise ModelFileError('classes must be a list of [building, floor]')
+    params = header['preprocessing']
+    if params['scaling'] not in SCALINGS:
+        raise ModelFileError(f'unknown scaling {params["scaling"]!r}')
+    scaler = RssiScaler.restore(params, arrays)
+    for name in ('scaler.mean', 'scaler.std'):
+        if arrays[name].shape != (len(ap_ids),):
+            raise ModelFileError(f'{name} has shape {arrays[name].shape}, '
+                                 f'expected ({len(ap_ids)},) for '
+                                 f'{len(ap_ids)} APs')
+    layers, width = [], len(ap_ids)
+    for spec in header['layers']:
+        w, b = arrays[spec['weight']], arrays[spec['bias']]
+        if spec['activation'] not in ACTIVATIONS:
+            raise ModelFileError(f'unknown activation {spec["activation"]!r}')
+        if w.ndim != 2 or w.shape[1] != width or b.shape != (w.shape[0],):
+            raise ModelFileError(f'layer {spec["weight"]} has shape '
+                                 f'{w.shape}, expected (*, {width})')
+        layers.append(Layer(w, b, spec['activation']))
+        width = w.shape[0]
+    if width != len(classes):
+        raise ModelFileError(f'the network has {width} outputs but '
+                             f'{len(classes)} classes')
+    return PlaceModel(ap_ids, scaler, layers, classes,
+                      header.get('provenance', {}))

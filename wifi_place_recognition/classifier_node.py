@@ -1,0 +1,239 @@
+"""
+``classifier_node``: WiFi scans in, building/floor with probabilities out.
+
+Subscribes ``wifi/scan`` (``sensor_msgs/JointState``: ``name`` = AP id,
+``position`` = RSSI dBm) and publishes one ``diagnostic_msgs/DiagnosticArray``
+per processed scan on ``~/place`` and ``/diagnostics``, plus a 1 Hz health
+status on ``/diagnostics``. Inference is a numpy forward pass: torch is
+never imported. When scans arrive faster than they are processed, the
+newest is processed and the ones it replaced are counted as dropped.
+"""
+
+import math
+import sys
+import threading
+import time
+from collections import Counter
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
+                                ParameterDescriptor, SetParametersResult)
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from sensor_msgs.msg import JointState
+
+from .artifact import load_model, ModelFileError
+from .recognizer import OK, PlaceRecognizer
+from .resources import default_model_path
+from .scan import REJECT_REASONS, ScanRejected
+
+LEVELS = {OK: DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN}
+THROTTLE_S = 5.0
+
+
+def _kv(key, value):
+    return KeyValue(key=key, value=str(value))
+
+
+class ClassifierNode(Node):
+    """Thin ROS adapter around :class:`PlaceRecognizer`."""
+
+    def __init__(self, **kwargs):
+        super().__init__('classifier_node', **kwargs)
+        model_path = self.declare_parameter(
+            'model_path', '', ParameterDescriptor(
+                description='model file from train_model; empty: the '
+                            'shipped UJIIndoorLoc model',
+                read_only=True)).value or str(default_model_path())
+        min_confidence = self.declare_parameter(
+            'min_confidence', 0.5, ParameterDescriptor(
+                description='below this top-class probability the status '
+                            'is WARN',
+                floating_point_range=[FloatingPointRange(
+                    from_value=0.0, to_value=1.0)])).value
+        min_known_aps = self.declare_parameter(
+            'min_known_aps', 3, ParameterDescriptor(
+                description='with fewer APs known to the model the status '
+                            'is WARN',
+                integer_range=[IntegerRange(
+                    from_value=0, to_value=10000, step=1)])).value
+        max_aps = self.declare_parameter(
+            'max_aps', 4096, ParameterDescriptor(
+                description='scans listing more APs are rejected',
+                integer_range=[IntegerRange(
+                    from_value=1, to_value=1000000, step=1)])).value
+
+        self.model_path = model_path
+        self.recognizer = PlaceRecognizer(load_model(model_path),
+                                          min_confidence, min_known_aps,
+                                          max_aps)
+        self.prob_keys = [f'prob/{n}' for n in
+                          self.recognizer.model.class_names]
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+
+        self.status_name = f'{self.get_name()}: place'
+        self.place_pub = self.create_publisher(
+            DiagnosticArray, '~/place',
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self.diag_pub = self.create_publisher(DiagnosticArray,
+                                              '/diagnostics', 10)
+        self.create_subscription(
+            JointState, 'wifi/scan', self._on_scan, qos_profile_sensor_data,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies())
+        self.create_timer(1.0, self._publish_health)
+
+        self.counts = Counter(received=0, answered=0, rejected=0, dropped=0)
+        self.last_latency_ms = math.nan
+        self._lock = threading.Lock()
+        self._pending = None
+        self._wake = threading.Event()
+        self._stopping = False
+        self._worker = threading.Thread(target=self._work, daemon=True)
+        self._worker.start()
+        provenance = self.recognizer.model.provenance
+        self.get_logger().info(
+            f'model {model_path}: {len(self.recognizer.model.ap_ids)} APs, '
+            f'{len(self.prob_keys)} classes (trained '
+            f'{provenance.get("created", "?")})')
+
+    # parameters -----------------------------------------------------------
+    def _validate_parameters(self, params):
+        for p in params:
+            if p.name == 'min_confidence' and not math.isfinite(p.value):
+                return SetParametersResult(
+                    successful=False, reason='min_confidence must be finite')
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params):
+        for p in params:
+            if p.name == 'min_confidence':
+                self.recognizer.min_confidence = p.value
+            elif p.name == 'min_known_aps':
+                self.recognizer.min_known_aps = p.value
+            elif p.name == 'max_aps':
+                self.recognizer.mapper.max_aps = p.value
+
+    # scans ----------------------------------------------------------------
+    def _on_scan(self, msg):
+        with self._lock:
+            self.counts['received'] += 1
+            if self._pending is not None:
+                self.counts['dropped'] += 1
+            self._pending = (msg, time.perf_counter())
+        self._wake.set()
+
+    def _work(self):
+        while True:
+            self._wake.wait()
+            self._wake.clear()
+            if self._stopping:
+                return
+            with self._lock:
+                pending, self._pending = self._pending, None
+            if pending is not None:
+                self._process(*pending)
+
+    def _process(self, msg, received_at):
+        status = DiagnosticStatus(name=self.status_name,
+                                  hardware_id=msg.header.frame_id)
+        try:
+            place = self.recognizer.classify(msg.name, msg.position)
+        except ScanRejected as exc:
+            self._reject(status, exc.reason, str(exc))
+        except Exception as exc:  # never let one scan stop the node
+            self._reject(status, 'internal_error', repr(exc))
+        else:
+            status.level = LEVELS[place.level]
+            status.message = place.message
+            latency_ms = (time.perf_counter() - received_at) * 1e3
+            status.values = [
+                _kv('building', place.building), _kv('floor', place.floor),
+                _kv('confidence', f'{place.confidence:.6f}'),
+                _kv('known_aps', place.known_aps),
+                _kv('unknown_aps', place.unknown_aps),
+                _kv('clipped_rssi', place.clipped),
+                _kv('latency_ms', f'{latency_ms:.3f}'),
+            ] + [_kv(k, f'{p:.6f}') for k, p in
+                 zip(self.prob_keys, place.probabilities)]
+            self.last_latency_ms = latency_ms
+            with self._lock:
+                self.counts['answered'] += 1
+        out = DiagnosticArray(status=[status])
+        out.header.stamp = msg.header.stamp
+        self.place_pub.publish(out)
+        self.diag_pub.publish(out)
+
+    def _reject(self, status, reason, detail):
+        with self._lock:
+            self.counts['rejected'] += 1
+            self.counts[f'rejected/{reason}'] += 1
+        status.level = DiagnosticStatus.ERROR
+        status.message = f'scan rejected: {detail}'
+        status.values = [_kv('reason', reason)]
+        self.get_logger().warn(f'scan rejected: {detail}',
+                               throttle_duration_sec=THROTTLE_S)
+
+    # health ---------------------------------------------------------------
+    def _publish_health(self):
+        with self._lock:
+            counts = dict(self.counts)
+        provenance = self.recognizer.model.provenance
+        selection = provenance.get('selection', {})
+        values = [_kv(f'scans_{k}', counts.get(k, 0)) for k in
+                  ('received', 'answered', 'rejected', 'dropped')]
+        values += [_kv(f'rejected/{r}', counts.get(f'rejected/{r}', 0))
+                   for r in REJECT_REASONS + ('internal_error',)]
+        values += [
+            _kv('last_latency_ms', f'{self.last_latency_ms:.3f}'),
+            _kv('model_path', self.model_path),
+            _kv('model_created', provenance.get('created', '')),
+            _kv('model_training_data_sha256',
+                provenance.get('training_data', {}).get('sha256', '')),
+            _kv('model_held_out_building_floor_accuracy',
+                selection.get('metrics', {}).get(
+                    'building_floor_accuracy', '')),
+        ]
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.OK, name=f'{self.get_name()}: health',
+            message=f'{counts["answered"]} scans answered, '
+                    f'{counts["rejected"]} rejected, '
+                    f'{counts["dropped"]} dropped',
+            hardware_id=self.model_path, values=values)
+        out = DiagnosticArray(status=[status])
+        out.header.stamp = self.get_clock().now().to_msg()
+        self.diag_pub.publish(out)
+
+    def destroy_node(self):
+        """Stop the worker thread, then the node."""
+        self._stopping = True
+        self._wake.set()
+        self._worker.join(timeout=2.0)
+        return super().destroy_node()
+
+
+def main(args=None):
+    """Run the node until SIGINT/SIGTERM; exit 1 on a bad model file."""
+    rclpy.init(args=args)
+    try:
+        node = ClassifierNode()
+    except ModelFileError as exc:
+        rclpy.logging.get_logger('classifier_node').error(
+            f'cannot load model: {exc}')
+        rclpy.try_shutdown()
+        return 1
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,25 @@
+"""Accuracy figures for building/floor predictions."""
+
+import numpy as np
+
+
+def accuracies(building, floor, pred_building, pred_floor):
+    """Return building, floor (number right) and building+floor accuracy."""
+    b_ok = np.asarray(building) == np.asarray(pred_building)
+    f_ok = np.asarray(floor) == np.asarray(pred_floor)
+    return {'samples': int(len(b_ok)),
+            'building_accuracy': float(b_ok.mean()),
+            'floor_accuracy': float(f_ok.mean()),
+            'building_floor_accuracy': float((b_ok & f_ok).mean())}
+
+
+def confusion(classes, building, floor, pred_building, pred_floor):
+    """Return a (k, k) count matrix, rows = true class, cols = predicted."""
+    index = {(int(b), int(f)): i for i, (b, f) in enumerate(classes)}
+    k = len(classes)
+    matrix = np.zeros((k, k), dtype=np.int64)
+    for t, p in zip(zip(building, floor), zip(pred_building, pred_floor)):
+        ti = index.get((int(t[0]), int(t[1])))
+        if ti is not None:
+            matrix[ti, index[(int(p[0]), int(p[1]))]] += 1
+    return matrix

@@ -1,0 +1,63 @@
+"""Turn RSSI vectors (NaN = not detected) into network inputs."""
+
+import numpy as np
+
+SCALINGS = ('joint', 'independent')
+
+
+class RssiScaler:
+    """
+    Fill not-detected APs with a constant, then standardise.
+
+    ``scaling='joint'`` uses one mean/std over every RSSI value (the paper's
+    best); ``'independent'`` one mean/std per AP. ``not_detected`` is the dBm
+    value given to undetected APs (paper: -110; 100 reproduces the raw file).
+    """
+
+    def __init__(self, not_detected=-110.0, scaling='joint'):
+        if scaling not in SCALINGS:
+            raise ValueError(f'scaling must be one of {SCALINGS}, '
+                             f'not {scaling!r}')
+        self.not_detected = float(not_detected)
+        self.scaling = scaling
+
+    def fill(self, rssi):
+        """Replace NaN (not detected) with the ``not_detected`` value."""
+        rssi = np.asarray(rssi, dtype=np.float32)
+        return np.where(np.isnan(rssi), np.float32(self.not_detected), rssi)
+
+    def fit(self, rssi):
+        """Learn mean and std from training scans."""
+        x = self.fill(rssi).astype(np.float64)
+        if self.scaling == 'joint':
+            mean = np.full(x.shape[1], x.mean())
+            std = np.full(x.shape[1], x.std())
+        else:
+            mean, std = x.mean(axis=0), x.std(axis=0)
+        self.mean_ = mean.astype(np.float32)
+        self.std_ = np.where(std > 1e-6, std, 1.0).astype(np.float32)
+        return self
+
+    def transform(self, rssi):
+        """Return standardised float32 inputs, shape (n, n_aps)."""
+        return (self.fill(rssi) - self.mean_) / self.std_
+
+    def fit_transform(self, rssi):
+        """Fit, then transform the same scans."""
+        return self.fit(rssi).transform(rssi)
+
+    def params(self):
+        """Return the JSON-able parameters (arrays go separately)."""
+        return {'not_detected': self.not_detected, 'scaling': self.scaling}
+
+    def arrays(self):
+        """Return the fitted arrays, keyed by name."""
+        return {'scaler.mean': self.mean_, 'scaler.std': self.std_}
+
+    @classmethod
+    def restore(cls, params, arrays):
+        """Rebuild a fitted scaler from :meth:`params` and :meth:`arrays`."""
+        scaler = cls(params['not_detected'], params['scaling'])
+        scaler.mean_ = arrays['scaler.mean']
+        scaler.std_ = arrays['scaler.std']
+        return scaler

@@ -1,0 +1,37 @@
+"""
+The one rule for which RSSI values are plausible, shared by CSVs and scans.
+
+Plausible received signal strength lies in [-120, 0] dBm. Some phones and
+drivers report a few dBm above 0 for an AP next to them: values in (0, 20]
+are clipped to 0 dBm and counted. Anything else (below -120, above 20,
+NaN or infinite where a reading is expected) is refused.
+"""
+
+import numpy as np
+
+MIN_DBM = -120.0
+MAX_DBM = 0.0
+CLIP_LIMIT_DBM = 20.0
+
+
+class RssiError(ValueError):
+    """An implausible RSSI value; ``index`` locates the first one."""
+
+    def __init__(self, message, index):
+        super().__init__(message)
+        self.index = index
+
+
+def clip_plausible(rssi):
+    """Return ``(rssi, n_clipped)``; NaN cells mean "not detected"."""
+    rssi = np.asarray(rssi, dtype=np.float64)
+    bad = np.isinf(rssi) | (rssi < MIN_DBM) | (rssi > CLIP_LIMIT_DBM)
+    if bad.any():
+        index = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise RssiError(f'RSSI {rssi[index]:g} dBm is outside the plausible '
+                        f'range [{MIN_DBM:g}, {CLIP_LIMIT_DBM:g}]', index)
+    above = rssi > MAX_DBM
+    n_clipped = int(above.sum())
+    if n_clipped:
+        rssi = np.where(above, MAX_DBM, rssi)
+    return rssi, n_clipped

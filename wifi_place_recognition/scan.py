@@ -1,0 +1,94 @@
+"""One WiFi scan (AP identifiers + RSSI) onto a model's AP vector, with checks."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .rssi import clip_plausible, RssiError
+
+#: Rejection reasons, in the order the checks run.
+REJECT_REASONS = ('length_mismatch', 'empty', 'oversize', 'non_finite',
+                  'implausible_rssi', 'no_known_ap')
+
+
+def normalize_ap_id(ap_id):
+    """
+    Return the comparable form of an AP identifier.
+
+    Case is ignored and ``-`` separators become ``:``, so
+    ``AA-BB-CC-00-11-22`` and ``aa:bb:cc:00:11:22`` match; a bare 12-digit
+    hex MAC gets colons. Dataset names such as ``WAP017`` compare
+    case-insensitively.
+    """
+    text = ap_id.strip().lower().replace('-', ':')
+    if len(text) == 12 and all(c in '0123456789abcdef' for c in text):
+        text = ':'.join(text[i:i + 2] for i in range(0, 12, 2))
+    return text
+
+
+class ScanRejected(ValueError):
+    """A scan that cannot be classified; ``reason`` is in REJECT_REASONS."""
+
+    def __init__(self, reason, detail):
+        super().__init__(f'{reason}: {detail}')
+        self.reason = reason
+
+
+@dataclass
+class MappedScan:
+    """A scan on the model's AP vector (NaN = not detected)."""
+
+    rssi: np.ndarray
+    known: int
+    unknown: int
+    clipped: int
+
+
+class ScanMapper:
+    """Map scans onto the AP order of ``ap_ids``."""
+
+    def __init__(self, ap_ids, max_aps=4096):
+        self.index = {normalize_ap_id(a): j for j, a in enumerate(ap_ids)}
+        self.size = len(ap_ids)
+        self.max_aps = max_aps
+
+    def columns(self, names):
+        """Return each name's column in the model, or -1 if unknown."""
+        get = self.index.get
+        return np.fromiter((get(normalize_ap_id(n), -1) for n in names),
+                           dtype=np.int64, count=len(names))
+
+    def map(self, names, rssi):
+        """
+        Return a :class:`MappedScan`; raise :class:`ScanRejected`.
+
+        An AP seen twice keeps its strongest reading; unknown APs are
+        ignored and counted; RSSI follows the rule of :mod:`.rssi`.
+        """
+        if len(names) != len(rssi):
+            raise ScanRejected('length_mismatch', f'{len(names)} names but '
+                               f'{len(rssi)} RSSI values')
+        if not len(names):
+            raise ScanRejected('empty', 'the scan lists no AP')
+        if len(names) > self.max_aps:
+            raise ScanRejected('oversize', f'{len(names)} APs, more than '
+                               f'max_aps={self.max_aps}')
+        values = np.asarray(rssi, dtype=np.float64)
+        if np.isnan(values).any():
+            raise ScanRejected('non_finite', 'an RSSI value is NaN')
+        try:
+            values, clipped = clip_plausible(values)
+        except RssiError as exc:
+            kind = 'non_finite' if np.isinf(values[exc.index]) else \
+                'implausible_rssi'
+            raise ScanRejected(kind, f'{names[exc.index[0]]!r}: {exc}') \
+                from None
+        cols = self.columns(names)
+        known = cols >= 0
+        n_known = int(np.unique(cols[known]).size)
+        if not n_known:
+            raise ScanRejected('no_known_ap', f'none of the {len(names)} APs '
+                               f'is known to the model')
+        vector = np.full(self.size, np.nan, np.float32)
+        np.fmax.at(vector, cols[known], values[known].astype(np.float32))
+        return MappedScan(vector, n_known, int((~known).sum()), clipped)

@@ -1,0 +1,87 @@
+"""``train_model``: fingerprint CSV in, model artifact out."""
+
+import argparse
+import sys
+from dataclasses import fields
+
+from .artifact import save_model
+from .cli import add_download_arguments, data_path, main_wrapper
+from .evaluate_model import evaluate, print_report
+from .fingerprints import read_fingerprints
+from .training import TrainConfig, train
+
+
+def _layers(text):
+    return tuple(int(n) for n in text.split(',') if n.strip())
+
+
+def build_parser():
+    """Return the argument parser; training options mirror TrainConfig."""
+    p = argparse.ArgumentParser(
+        prog='train_model',
+        description='Train the SAE + classifier on a fingerprint CSV and '
+                    'write the model artifact that classifier_node loads.')
+    p.add_argument('--data', help='training CSV (UJIIndoorLoc or generic '
+                                  'format), or the UCI zip')
+    p.add_argument('-o', '--output', required=True,
+                   help='model file to write (atomically)')
+    p.add_argument('--test', help='also evaluate on this CSV at the end')
+    p.add_argument('--quiet', action='store_true',
+                   help='no per-epoch progress lines')
+    add_download_arguments(p)
+    defaults = TrainConfig()
+    g = p.add_argument_group('model and training (defaults: the paper)')
+    for f in fields(TrainConfig):
+        default = getattr(defaults, f.name)
+        flag = '--' + f.name.replace('_', '-')
+        if isinstance(default, bool):
+            g.add_argument(flag, action=argparse.BooleanOptionalAction,
+                           default=default)
+        elif isinstance(default, tuple):
+            g.add_argument(flag, type=_layers, default=default,
+                           metavar='N,N,...',
+                           help=f'default: {",".join(map(str, default))}')
+        else:
+            g.add_argument(flag, type=type(default), default=default,
+                           help=f'default: {default}')
+    return p
+
+
+@main_wrapper
+def main(argv=None):
+    """Train, save, summarise; exit 2 with a message on bad input."""
+    args = build_parser().parse_args(argv)
+    config = TrainConfig(**{f.name: getattr(args, f.name)
+                            for f in fields(TrainConfig)})
+    train_fp = read_fingerprints(data_path(args.data, args, 'training data'),
+                                 role='train')
+    test_fp = None
+    if args.test or (args.download and not args.data):
+        test_fp = read_fingerprints(data_path(args.test, args, 'test data'),
+                                    role='test')
+
+    def log(line):
+        if not args.quiet:
+            print(line, file=sys.stderr, flush=True)
+
+    log(f'{train_fp.source}: {len(train_fp)} scans, {len(train_fp.ap_ids)} '
+        f'APs, {train_fp.clipped} RSSI cells clipped to 0 dBm')
+    model, _, report = train(train_fp, config, log)
+    save_model(model, args.output)
+    print(f'wrote {args.output}: {len(model.ap_ids)} APs, '
+          f'{len(model.classes)} classes, trained in {report.seconds:.1f} s '
+          f'(best epoch {report.best_epoch}; {report.dropped_empty} scans '
+          f'without any AP left out)')
+    if report.validation:
+        print(f'held-out ({config.validation}'
+              + (f' {report.validation_phones}'
+                 if report.validation_phones else '')
+              + f', {report.validation_samples} scans): building+floor '
+              f'{report.validation["building_floor_accuracy"]:.4f}')
+    if test_fp is not None:
+        print_report(evaluate(model, test_fp), model, test_fp.source)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,275 @@
+"""
+Training the SAE + classifier with torch (Nowicki & Wietrzykowski, 2017).
+
+The stacked autoencoder (encoder ``sae_layers``, mirrored decoder) is first
+trained on reconstruction; the decoder is dropped; a classifier
+(``classifier_layers`` with dropout, softmax over every building/floor class
+seen) is put on top and the whole network fine-tuned with cross-entropy and
+Adam. The epoch with the best building+floor accuracy on a held-out split of
+the training file is kept.
+"""
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import torch
+from torch import nn
+
+from .metrics import accuracies
+from .model import Layer, PlaceModel
+from .preprocessing import RssiScaler
+
+TORCH_ACTIVATIONS = {'relu': nn.ReLU, 'elu': nn.ELU, 'tanh': nn.Tanh}
+VALIDATIONS = ('phone', 'random', 'none')
+
+
+@dataclass
+class TrainConfig:
+    """Every choice that shapes a model; stored in the artifact."""
+
+    sae_layers: tuple = (256, 128, 64)
+    classifier_layers: tuple = (128, 128)
+    activation: str = 'relu'
+    dropout: float = 0.2
+    not_detected: float = -110.0
+    scaling: str = 'joint'
+    sae_epochs: int = 20
+    epochs: int = 40
+    patience: int = 10
+    batch_size: int = 64
+    learning_rate: float = 1e-3
+    validation: str = 'phone'
+    validation_fraction: float = 0.2
+    refit: bool = False
+    seed: int = 0
+    threads: int = 0  # 0: torch's default
+
+    def __post_init__(self):
+        """Check values so that a bad option fails before training starts."""
+        self.sae_layers = tuple(int(n) for n in self.sae_layers)
+        self.classifier_layers = tuple(int(n) for n in self.classifier_layers)
+        checks = [
+            (all(n > 0 for n in self.sae_layers + self.classifier_layers),
+             'layer sizes must be positive'),
+            (self.activation in TORCH_ACTIVATIONS,
+             f'activation must be one of {sorted(TORCH_ACTIVATIONS)}'),
+            (0.0 <= self.dropout < 1.0, 'dropout must be in [0, 1)'),
+            (self.sae_epochs >= 0 and self.epochs >= 1 and
+             self.patience >= 1, 'epochs must be positive'),
+            (self.batch_size >= 1 and self.learning_rate > 0,
+             'batch size and learning rate must be positive'),
+            (self.validation in VALIDATIONS,
+             f'validation must be one of {VALIDATIONS}'),
+            (0.0 < self.validation_fraction < 1.0,
+             'validation fraction must be in (0, 1)'),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(message)
+
+
+@dataclass
+class TrainReport:
+    """What happened during training, for the summary and provenance."""
+
+    best_epoch: int = 0
+    validation: dict = field(default_factory=dict)
+    validation_phones: list = field(default_factory=list)
+    train_samples: int = 0
+    validation_samples: int = 0
+    dropped_empty: int = 0
+    seconds: float = 0.0
+
+
+def split_validation(fp, config):
+    """
+    Return a boolean mask of the held-out scans.
+
+    ``phone``: whole phones (PHONEID) are held out, drawn at random until
+    about ``validation_fraction`` of the scans, skipping a phone if it would
+    take more than 1.5× that or the last training scans of a class.
+    Falls back to ``random`` when the file has no PHONEID column.
+    """
+    rng = np.random.default_rng(config.seed)
+    n = len(fp)
+    if config.validation == 'none':
+        return np.zeros(n, bool)
+    phones = fp.meta.get('PHONEID')
+    if config.validation == 'random' or phones is None:
+        return rng.random(n) < config.validation_fraction
+    labels = fp.building * 1000 + fp.floor
+    held = np.zeros(n, bool)
+    for phone in rng.permutation(np.unique(phones)):
+        if held.sum() >= config.validation_fraction * n:
+            break
+        candidate = held | (phones == phone)
+        if candidate.sum() > 1.5 * config.validation_fraction * n:
+            continue
+        if len(np.unique(labels[~candidate])) < len(np.unique(labels)):
+            continue
+        held = candidate
+    return held
+
+
+def _dense(sizes, activation, dropout=0.0):
+    layers = []
+    for n_in, n_out in zip(sizes[:-1], sizes[1:]):
+        layers += [nn.Linear(n_in, n_out), TORCH_ACTIVATIONS[activation]()]
+        if dropout:
+            layers.append(nn.Dropout(dropout))
+    return layers
+
+
+class PlaceNet(nn.Module):
+    """Encoder (from the SAE) + classifier; outputs logits."""
+
+    def __init__(self, n_inputs, n_classes, config):
+        super().__init__()
+        self.activation = config.activation
+        self.encoder = nn.Sequential(*_dense(
+            (n_inputs,) + config.sae_layers, config.activation))
+        head = (config.sae_layers[-1],) + config.classifier_layers
+        self.head = nn.Sequential(
+            *_dense(head, config.activation, config.dropout),
+            nn.Linear(head[-1], n_classes))
+
+    def forward(self, x):
+        """Return logits."""
+        return self.head(self.encoder(x))
+
+    def frozen_layers(self):
+        """Return the dense layers as numpy :class:`Layer` objects."""
+        linears = [m for m in self.modules() if isinstance(m, nn.Linear)]
+        return [Layer(m.weight.detach().numpy().copy(),
+                      m.bias.detach().numpy().copy(),
+                      'linear' if m is linears[-1] else self.activation)
+                for m in linears]
+
+
+def _batches(n, batch_size, generator):
+    order = torch.randperm(n, generator=generator)
+    return torch.split(order, batch_size)
+
+
+def _pretrain_sae(net, x, config, generator, log):
+    sizes = (x.shape[1],) + config.sae_layers
+    decoder = nn.Sequential(*_dense(sizes[::-1], config.activation)[:-1])
+    sae = nn.Sequential(net.encoder, decoder)
+    optimiser = torch.optim.Adam(sae.parameters(), lr=config.learning_rate)
+    for epoch in range(1, config.sae_epochs + 1):
+        total = 0.0
+        for idx in _batches(len(x), config.batch_size, generator):
+            optimiser.zero_grad()
+            loss = nn.functional.mse_loss(sae(x[idx]), x[idx])
+            loss.backward()
+            optimiser.step()
+            total += loss.item() * len(idx)
+        log(f'sae epoch {epoch:3d}/{config.sae_epochs}  '
+            f'reconstruction mse {total / len(x):.4f}')
+
+
+def _predict_labels(net, x, classes):
+    net.eval()
+    with torch.no_grad():
+        best = net(x).argmax(dim=1).numpy()
+    net.train()
+    return classes[best, 0], classes[best, 1]
+
+
+def _fit(x, y, config, epochs, val=None, classes=None, log=print):
+    """Train a fresh network; with ``val``, keep the best epoch."""
+    torch.manual_seed(config.seed)
+    generator = torch.Generator().manual_seed(config.seed)
+    net = PlaceNet(x.shape[1], len(classes), config)
+    _pretrain_sae(net, x, config, generator, log)
+    optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
+    best = (-1.0, 0, None, {})
+    for epoch in range(1, epochs + 1):
+        total = 0.0
+        for idx in _batches(len(x), config.batch_size, generator):
+            optimiser.zero_grad()
+            loss = nn.functional.cross_entropy(net(x[idx]), y[idx])
+            loss.backward()
+            optimiser.step()
+            total += loss.item() * len(idx)
+        line = f'epoch {epoch:3d}/{epochs}  loss {total / len(x):.4f}'
+        if val is not None:
+            xv, bv, fv = val
+            scores = accuracies(bv, fv, *_predict_labels(net, xv, classes))
+            line += (f'  held-out building+floor '
+                     f'{scores["building_floor_accuracy"]:.4f}')
+            if scores['building_floor_accuracy'] > best[0]:
+                best = (scores['building_floor_accuracy'], epoch,
+                        {k: v.clone() for k, v in net.state_dict().items()},
+                        scores)
+            elif epoch - best[1] >= config.patience:
+                log(line + '  (early stop)')
+                break
+        log(line)
+    if val is not None:
+        net.load_state_dict(best[2])
+    net.eval()
+    return net, best[1] or epochs, best[3]
+
+
+def train(fp, config, log=print):
+    """Train on :class:`Fingerprints`; return (PlaceModel, PlaceNet, report)."""
+    start = time.perf_counter()
+    if config.threads:
+        torch.set_num_threads(config.threads)
+    report = TrainReport()
+    usable = ~fp.empty_rows
+    report.dropped_empty = int((~usable).sum())
+    fp = fp.subset(usable)
+    if len(fp) == 0:
+        raise ValueError(f'{fp.source}: no scan detects any AP')
+    classes = np.unique(np.stack([fp.building, fp.floor], axis=1), axis=0)
+    if len(classes) < 2:
+        raise ValueError(f'{fp.source}: only one building/floor class; '
+                         f'need at least two')
+    class_index = {tuple(c): i for i, c in enumerate(classes)}
+    y_all = torch.as_tensor([class_index[(b, f)]
+                             for b, f in zip(fp.building, fp.floor)])
+    held = split_validation(fp, config)
+    report.train_samples = int((~held).sum())
+    report.validation_samples = int(held.sum())
+    if 'PHONEID' in fp.meta and config.validation == 'phone':
+        report.validation_phones = sorted(
+            int(p) for p in np.unique(fp.meta['PHONEID'][held]))
+
+    scaler = RssiScaler(config.not_detected, config.scaling)
+    scaler.fit(fp.rssi[~held])
+    x_all = torch.as_tensor(scaler.transform(fp.rssi))
+    val = None
+    if held.any():
+        val = (x_all[held], fp.building[held], fp.floor[held])
+        log(f'training on {report.train_samples} scans, selecting on '
+            f'{report.validation_samples} held-out scans '
+            f'({config.validation})')
+    net, report.best_epoch, report.validation = _fit(
+        x_all[~held], y_all[~held], config, config.epochs, val, classes, log)
+    if config.refit and held.any():
+        log(f'refit on all {len(fp)} scans for {report.best_epoch} epochs')
+        scaler.fit(fp.rssi)
+        x_all = torch.as_tensor(scaler.transform(fp.rssi))
+        net, _, _ = _fit(x_all, y_all, config, report.best_epoch, None,
+                         classes, log)
+    report.seconds = time.perf_counter() - start
+    provenance = {
+        'config': asdict(config),
+        'training_data': {'source': fp.source, 'sha256': fp.sha256,
+                          'scans': len(fp), 'dropped_empty':
+                          report.dropped_empty, 'clipped_cells': fp.clipped},
+        'selection': {'held_out': config.validation,
+                      'held_out_phones': report.validation_phones,
+                      'held_out_scans': report.validation_samples,
+                      'best_epoch': report.best_epoch,
+                      'metrics': report.validation},
+        'train_seconds': round(report.seconds, 2),
+        'versions': {'torch': torch.__version__, 'numpy': np.__version__},
+        'created': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
+    }
+    model = PlaceModel(fp.ap_ids, scaler, net.frozen_layers(), classes,
+                       provenance)
+    return model, net, report
