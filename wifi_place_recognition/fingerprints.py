@@ -142,7 +142,7 @@ def parse_fingerprints(text, source=('<string>', b'')):
     if bad.any():
         r, c = np.argwhere(bad)[0]
         raise DataError(f'{name}: row {r + 2}, column {header[c]}: value '
-                        f'{table[r, c]!r} is not a finite number')
+                        f'{table[r, c]:g} is not a finite number')
 
     rssi = table[:, ap_index]
     detected = rssi != NOT_DETECTED_MARKER

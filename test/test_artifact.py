@@ -1,0 +1,143 @@
+"""The model file: round trip, and refusal of every kind of bad file."""
+
+import io
+import json
+import pickle
+import zipfile
+
+import numpy as np
+import pytest
+from wifi_place_recognition.artifact import (
+    load_model, ModelFileError, save_model)
+from wifi_place_recognition.resources import default_model_path
+
+
+class _Payload:
+    """Pickles to a call that creates a marker file when unpickled."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (open, (self.marker, 'w'))
+
+
+def test_round_trip_keeps_predictions(synthetic, tmp_path):
+    _, model_path = synthetic
+    model = load_model(model_path)
+    save_model(model, tmp_path / 'copy.npz')
+    copy = load_model(tmp_path / 'copy.npz')
+    x = np.full((3, len(model.ap_ids)), np.nan, np.float32)
+    x[:, :5] = -60
+    np.testing.assert_array_equal(model.predict_proba(x),
+                                  copy.predict_proba(x))
+    assert copy.ap_ids == model.ap_ids
+    assert copy.provenance['config']['sae_layers'] == [32, 16]
+    assert (tmp_path / 'copy.npz').stat().st_mode & 0o044  # not 0600
+
+
+def test_shipped_model_loads_with_its_provenance():
+    model = load_model(default_model_path())
+    assert len(model.ap_ids) == 520 and len(model.classes) == 13
+    prov = model.provenance
+    assert prov['training_data']['sha256'].startswith('45ca0128')
+    assert prov['selection']['held_out'] == 'phone'
+
+
+def _header_and_arrays(path):
+    with np.load(path, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    return json.loads(arrays['header'].tobytes()), arrays
+
+
+def _write_npz(path, header, arrays):
+    arrays = dict(arrays)
+    arrays['header'] = np.frombuffer(json.dumps(header).encode(), np.uint8)
+    np.savez(path, **arrays)
+    return path
+
+
+def test_truncated_empty_and_bit_flipped_files(synthetic, tmp_path):
+    data = synthetic[1].read_bytes()
+    cases = {'truncated': data[:len(data) // 2], 'empty': b'',
+             'garbage': b'not a model at all'}
+    flipped = bytearray(data)
+    flipped[len(data) // 3] ^= 0x10
+    cases['flipped'] = bytes(flipped)
+    for name, content in cases.items():
+        path = tmp_path / f'{name}.npz'
+        path.write_bytes(content)
+        with pytest.raises(ModelFileError) as err:
+            load_model(path)
+        assert str(err.value).startswith(str(path)), name
+
+
+def test_missing_file():
+    with pytest.raises(ModelFileError, match='cannot read'):
+        load_model('/nonexistent/model.npz')
+
+
+def test_tampered_header_fails_the_checksum(synthetic, tmp_path):
+    header, arrays = _header_and_arrays(synthetic[1])
+    header['ap_ids'][0] = 'evil'
+    path = _write_npz(tmp_path / 't.npz', header, arrays)
+    with pytest.raises(ModelFileError, match='checksum mismatch'):
+        load_model(path)
+
+
+def test_wrong_schema_and_format(synthetic, tmp_path):
+    header, arrays = _header_and_arrays(synthetic[1])
+    header['schema_version'] = 99
+    with pytest.raises(ModelFileError, match='schema version 99'):
+        load_model(_write_npz(tmp_path / 's.npz', header, arrays))
+    with pytest.raises(ModelFileError, match='no header'):
+        np.savez(tmp_path / 'plain.npz', x=np.zeros(3))
+        load_model(tmp_path / 'plain.npz')
+
+
+def test_wrong_ap_count_is_refused_even_with_a_valid_checksum(
+        synthetic, tmp_path):
+    from wifi_place_recognition.artifact import _digest
+    header, arrays = _header_and_arrays(synthetic[1])
+    header.pop('sha256')
+    header['ap_ids'] = header['ap_ids'][:-1]
+    header['sha256'] = _digest(header, {k: v for k, v in arrays.items()
+                                        if k != 'header'})
+    arrays.pop('header')
+    with pytest.raises(ModelFileError, match='expected'):
+        load_model(_write_npz(tmp_path / 'w.npz', header, arrays))
+
+
+def test_pickle_payloads_never_run(tmp_path):
+    marker = tmp_path / 'PWNED'
+    payload = pickle.dumps(_Payload(marker))
+    raw = tmp_path / 'model.npz'
+    raw.write_bytes(payload)
+    # The same payload as an object array inside a real npz.
+    buf = io.BytesIO()
+    np.save(buf, np.array([_Payload(marker)], dtype=object),
+            allow_pickle=True)
+    inner = tmp_path / 'inner.npz'
+    with zipfile.ZipFile(inner, 'w') as zf:
+        zf.writestr('header.npy', buf.getvalue())
+    for path in (raw, inner):
+        with pytest.raises(ModelFileError):
+            load_model(path)
+    assert not marker.exists()
+
+
+def test_failed_write_keeps_the_previous_file(synthetic, tmp_path,
+                                              monkeypatch):
+    model = load_model(synthetic[1])
+    path = tmp_path / 'm.npz'
+    save_model(model, path)
+    before = path.read_bytes()
+
+    def disk_full(f, **arrays):
+        f.write(b'PK partial')
+        raise OSError(28, 'No space left on device')
+    monkeypatch.setattr(np, 'savez', disk_full)
+    with pytest.raises(OSError):
+        save_model(model, path)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ['m.npz']

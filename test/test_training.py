@@ -1,0 +1,145 @@
+"""Training, the numpy forward pass, and the train/evaluate command lines."""
+
+import csv
+import json
+
+from conftest import dataset_file, FAST, python_module, run, synthetic_csv
+import numpy as np
+import pytest
+import torch
+from wifi_place_recognition.artifact import load_model
+from wifi_place_recognition.fingerprints import read_fingerprints
+from wifi_place_recognition.training import (
+    split_validation, train, TrainConfig)
+
+SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
+             epochs=15)
+
+
+def _torch_proba(net, model, rssi):
+    with torch.no_grad():
+        logits = net(torch.as_tensor(model.scaler.transform(rssi)))
+    return torch.softmax(logits, dim=1).numpy()
+
+
+def test_same_seed_same_model(tmp_path):
+    fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv'))
+    a, _, ra = train(fp, TrainConfig(**SMALL), log=lambda s: None)
+    b, _, rb = train(fp, TrainConfig(**SMALL), log=lambda s: None)
+    assert ra.validation == rb.validation and ra.best_epoch == rb.best_epoch
+    for la, lb in zip(a.layers, b.layers):
+        np.testing.assert_array_equal(la.weight, lb.weight)
+
+
+def test_learns_the_synthetic_building_and_numpy_matches_torch(tmp_path):
+    fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv'))
+    test = read_fingerprints(synthetic_csv(tmp_path / 'b.csv', seed=0))
+    model, net, report = train(fp, TrainConfig(**SMALL), log=lambda s: None)
+    _, _, _, proba = model.predict(test.rssi)
+    assert report.validation['building_floor_accuracy'] > 0.9
+    np.testing.assert_allclose(proba, _torch_proba(net, model, test.rssi),
+                               atol=1e-5)
+
+
+def test_phone_split_holds_out_whole_phones_and_keeps_every_class(tmp_path):
+    fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv', phones=6))
+    held = split_validation(fp, TrainConfig(seed=3))
+    phones = fp.meta['PHONEID']
+    assert held.any()
+    assert not set(phones[held]) & set(phones[~held])
+    classes = set(zip(fp.building, fp.floor))
+    assert set(zip(fp.building[~held], fp.floor[~held])) == classes
+
+
+def test_random_split_without_phone_column(tmp_path):
+    fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv'))
+    fp.meta.pop('PHONEID')
+    held = split_validation(fp, TrainConfig(validation_fraction=0.25))
+    assert 0.15 < held.mean() < 0.35
+
+
+def test_bad_config_values_are_refused():
+    with pytest.raises(ValueError, match='dropout'):
+        TrainConfig(dropout=1.5)
+    with pytest.raises(ValueError, match='validation must be one of'):
+        TrainConfig(validation='test-file')
+
+
+def test_numpy_matches_torch_on_real_data():
+    fp = read_fingerprints(dataset_file('trainingData.csv'))
+    test = read_fingerprints(dataset_file('validationData-public.csv'))
+    model, net, _ = train(fp, TrainConfig(sae_epochs=1, epochs=2),
+                          log=lambda s: None)
+    proba = model.predict_proba(test.rssi)
+    ref = _torch_proba(net, model, test.rssi)
+    assert np.abs(proba - ref).max() <= 1e-5
+    assert (proba.argmax(1) == ref.argmax(1)).all()
+
+
+def test_shipped_model_reaches_the_paper_level():
+    result = run(python_module(
+        'evaluate_model', '--json', '--data',
+        dataset_file('validationData-public.csv')))
+    assert result.returncode == 0, result.stderr
+    scores = json.loads(result.stdout)
+    assert scores['samples'] == 556
+    assert scores['building_floor_accuracy'] >= 0.92
+
+
+# command lines ---------------------------------------------------------------
+
+def test_train_then_evaluate_on_the_command_line(tmp_path):
+    data = synthetic_csv(tmp_path / 'a.csv')
+    model = tmp_path / 'out' / 'model.npz'
+    (tmp_path / 'out').mkdir()
+    result = run(python_module('train_model', '--data', data, '-o', model,
+                               '--test', data, *FAST))
+    assert result.returncode == 0, result.stderr
+    assert 'building floor accuracy' in result.stdout
+    assert load_model(model).provenance['config']['epochs'] == 15
+
+    preds = tmp_path / 'pred.csv'
+    result = run(python_module('evaluate_model', '--model', model, '--data',
+                               data, '--json', '--predictions', preds))
+    assert result.returncode == 0, result.stderr
+    scores = json.loads(result.stdout)
+    assert {'samples', 'building_accuracy', 'floor_accuracy',
+            'building_floor_accuracy'} <= set(scores)
+    rows = list(csv.DictReader(preds.open()))
+    assert len(rows) == scores['samples'] == 240
+    assert rows[0].keys() >= {'pred_building', 'pred_floor', 'confidence'}
+
+
+@pytest.mark.parametrize('content, message', [
+    ('WAP1,FLOOR\n-50,1\n', 'missing label column(s) BUILDINGID'),
+    ('WAP1,FLOOR,BUILDINGID\n-50,x,0\n', "row 2, column FLOOR: value 'x'"),
+    ('WAP1,FLOOR,BUILDINGID\n-50,1,0\n-60,1\n', 'row 3 has 2 fields'),
+    ('', 'empty file'),
+    ('WAP1,FLOOR,BUILDINGID\n-50,1,0\n-60,1,0\n', 'only one building/floor'),
+])
+def test_train_model_bad_csv_exits_2_and_writes_nothing(
+        tmp_path, content, message):
+    data = tmp_path / 'bad.csv'
+    data.write_text(content)
+    model = tmp_path / 'model.npz'
+    result = run(python_module('train_model', '--data', data, '-o', model,
+                               *FAST))
+    assert result.returncode == 2
+    assert message in result.stderr and 'Traceback' not in result.stderr
+    assert list(tmp_path.iterdir()) == [data]
+
+
+def test_evaluate_model_bad_inputs_exit_2_without_traceback(
+        synthetic, tmp_path):
+    data, model = synthetic
+    garbage = tmp_path / 'garbage.npz'
+    garbage.write_bytes(b'\x00' * 100)
+    for args, message in [
+            (['--model', garbage, '--data', data], 'garbage.npz'),
+            (['--model', model, '--data', tmp_path / 'none.csv'],
+             'cannot read'),
+            (['--model', model], 'no data given')]:
+        result = run(python_module('evaluate_model', *args))
+        assert result.returncode == 2, args
+        assert message in result.stderr
+        assert 'Traceback' not in result.stderr
