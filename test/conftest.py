@@ -30,7 +30,8 @@ def mac(i):
 
 
 def synthetic_csv(path, scans_per_class=60, n_aps=24, seed=0, phones=4):
-    """Write a generic fingerprint CSV: 2 buildings x 2 floors, MAC columns.
+    """
+    Write a generic fingerprint CSV: 2 buildings x 2 floors, MAC columns.
 
     Each class has its own strong APs; every scan draws RSSI around them.
     """
@@ -89,3 +90,14 @@ def wait_until(predicate, timeout, spin=None):
         else:
             time.sleep(0.02)
     return predicate()
+
+
+@pytest.fixture(scope='module')
+def ros():
+    """Return an rclpy node for the test's side (one context per module)."""
+    import rclpy
+    rclpy.init()
+    node = rclpy.create_node('test_client')
+    yield node
+    node.destroy_node()
+    rclpy.try_shutdown()

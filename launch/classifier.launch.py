@@ -1,0 +1,26 @@
+"""Start classifier_node with the package's params file and a scan remapping."""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def generate_launch_description():
+    """Return the launch description (needs launch_ros: a full ROS install)."""
+    share = get_package_share_directory('wifi_place_recognition')
+    return LaunchDescription([
+        DeclareLaunchArgument(
+            'params_file',
+            default_value=os.path.join(share, 'config',
+                                       'classifier_node.yaml')),
+        DeclareLaunchArgument('scan_topic', default_value='wifi/scan'),
+        Node(package='wifi_place_recognition', executable='classifier_node',
+             name='classifier_node',
+             parameters=[LaunchConfiguration('params_file')],
+             remappings=[('wifi/scan', LaunchConfiguration('scan_topic'))],
+             output='screen'),
+    ])

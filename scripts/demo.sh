@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# The main job: start classifier_node with the shipped model and replay the
+# UJIIndoorLoc test scans through it over ROS 2, printing live progress and
+# the final accuracy. Usage: scripts/demo.sh [TEST_CSV]
+# Without TEST_CSV the public UCI zip is downloaded (once) and its
+# validationData.csv is replayed.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+if [ $# -gt 0 ]; then data=(--data "$1"); else data=(--download); fi
+export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$((RANDOM % 90 + 10))}"
+export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
+.venv/bin/classifier_node &
+node=$!
+trap 'kill -INT $node 2>/dev/null; wait $node' EXIT
+.venv/bin/replay_scans "${data[@]}"

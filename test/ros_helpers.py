@@ -1,0 +1,111 @@
+"""Test-side ROS helpers: a node in its own process, and a scan client."""
+
+import os
+import signal
+import subprocess
+
+from conftest import wait_until
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+import rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+
+RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+
+
+class NodeProcess:
+    """A classifier_node in its own process, stopped with SIGINT."""
+
+    def __init__(self, tmp_path, argv, name='classifier_node', env=None):
+        self.log = tmp_path / f'{name}.log'
+        self.proc = subprocess.Popen(
+            argv + ['--ros-args', '-r', f'__node:={name}'],
+            stdout=subprocess.DEVNULL, stderr=self.log.open('w'),
+            env=env or os.environ.copy())
+        self.name = name
+
+    def stop(self, sig=signal.SIGINT):
+        """Stop the node; return (exit code, its log)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        try:
+            code = self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            code = 'hung'
+        return code, self.log.read_text()
+
+
+class Client:
+    """The test's side: publishes scans, collects answers by stamp."""
+
+    def __init__(self, node, node_name='classifier_node'):
+        self.node = node
+        self.pub = node.create_publisher(JointState, 'wifi/scan', RELIABLE)
+        self.answers = {}
+        self.health = []
+        self.subs = [
+            node.create_subscription(DiagnosticArray, f'/{node_name}/place',
+                                     self._on_place, RELIABLE),
+            node.create_subscription(DiagnosticArray, '/diagnostics',
+                                     self._on_diag, RELIABLE)]
+        self.params = node.create_client(
+            SetParameters, f'/{node_name}/set_parameters')
+        self.seq = 0
+
+    def _on_place(self, msg):
+        self.answers[msg.header.stamp.sec] = msg
+
+    def _on_diag(self, msg):
+        self.health += [s for s in msg.status if s.name.endswith('health')]
+
+    def wait_ready(self, proc, probe, timeout=20):
+        """
+        Wait for the node, then send ``probe`` scans until one is answered.
+
+        Discovery is not symmetric: the first scans after this side sees the
+        node may not yet be accepted by the node's reader.
+        """
+        assert wait_until(lambda: self.pub.get_subscription_count() > 0 and
+                          self.subs[0].get_publisher_count() > 0 and
+                          self.params.service_is_ready(), timeout,
+                          self.node), proc.stop()[1]
+        for _ in range(50):
+            try:
+                return self.send(*probe, timeout=0.2)
+            except AssertionError:
+                pass
+        raise AssertionError(proc.stop()[1])
+
+    def send(self, names, rssi, frame_id='wlan0', timeout=5.0):
+        """Publish one scan; return the node's DiagnosticStatus for it."""
+        self.seq += 1
+        msg = JointState(name=list(names), position=[float(v) for v in rssi])
+        msg.header.stamp.sec = self.seq
+        msg.header.frame_id = frame_id
+        self.pub.publish(msg)
+        seq = self.seq
+        assert wait_until(lambda: seq in self.answers, timeout, self.node)
+        return self.answers[seq].status[0]
+
+    def set_param(self, name, value):
+        """Set one parameter over the service; return SetParametersResult."""
+        kind = {float: ParameterType.PARAMETER_DOUBLE,
+                int: ParameterType.PARAMETER_INTEGER,
+                str: ParameterType.PARAMETER_STRING}[type(value)]
+        field = {float: 'double_value', int: 'integer_value',
+                 str: 'string_value'}[type(value)]
+        pv = ParameterValue(type=kind, **{field: value})
+        future = self.params.call_async(SetParameters.Request(
+            parameters=[Parameter(name=name, value=pv)]))
+        rclpy.spin_until_future_complete(self.node, future, timeout_sec=5)
+        return future.result().results[0]
+
+    def close(self):
+        """Destroy the publisher, subscriptions and client."""
+        for entity in self.subs:
+            self.node.destroy_subscription(entity)
+        self.node.destroy_publisher(self.pub)
+        self.node.destroy_client(self.params)
