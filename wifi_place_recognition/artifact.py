@@ -17,7 +17,7 @@ import numpy as np
 
 from .atomic import atomic_write
 from .model import ACTIVATIONS, Layer, PlaceModel
-from .preprocessing import RssiScaler, SCALINGS
+from .preprocessing import RssiScaler
 
 FORMAT = 'wifi_place_recognition/model'
 SCHEMA_VERSION = 1
@@ -131,10 +131,7 @@ def _build(header, arrays):
     classes = np.asarray(header['classes'], dtype=np.int64)
     if classes.ndim != 2 or classes.shape[1] != 2 or len(classes) < 1:
         raise ModelFileError('classes must be a list of [building, floor]')
-    params = header['preprocessing']
-    if params['scaling'] not in SCALINGS:
-        raise ModelFileError(f'unknown scaling {params["scaling"]!r}')
-    scaler = RssiScaler.restore(params, arrays)
+    scaler = RssiScaler.restore(header['preprocessing'], arrays)
     for name in ('scaler.mean', 'scaler.std'):
         if arrays[name].shape != (len(ap_ids),):
             raise ModelFileError(f'{name} has shape {arrays[name].shape}, '

@@ -3,6 +3,12 @@
 import numpy as np
 
 SCALINGS = ('joint', 'independent')
+#: dBm as is (undetected = ``not_detected``), or a positive signal in
+#: [0, 1] that is 0 for undetected APs (Torres-Sospedra et al. 2015):
+#: ``powed`` = ((dBm - floor) / -floor) ** e, ``exponential`` =
+#: (exp((dBm - floor) / 24) - 1) / (exp(-floor / 24) - 1), with floor =
+#: ``not_detected``.
+REPRESENTATIONS = ('dbm', 'powed', 'exponential')
 
 
 class RssiScaler:
@@ -14,17 +20,34 @@ class RssiScaler:
     value given to undetected APs (paper: -110; 100 reproduces the raw file).
     """
 
-    def __init__(self, not_detected=-110.0, scaling='joint'):
+    def __init__(self, not_detected=-110.0, scaling='joint',
+                 representation='dbm'):
         if scaling not in SCALINGS:
             raise ValueError(f'scaling must be one of {SCALINGS}, '
                              f'not {scaling!r}')
+        if representation not in REPRESENTATIONS:
+            raise ValueError(f'representation must be one of '
+                             f'{REPRESENTATIONS}, not {representation!r}')
+        if representation != 'dbm' and not not_detected < 0:
+            raise ValueError(f'{representation} needs a negative '
+                             f'not_detected floor')
         self.not_detected = float(not_detected)
         self.scaling = scaling
+        self.representation = representation
 
     def fill(self, rssi):
-        """Replace NaN (not detected) with the ``not_detected`` value."""
+        """Return the representation, with undetected APs filled in."""
         rssi = np.asarray(rssi, dtype=np.float32)
-        return np.where(np.isnan(rssi), np.float32(self.not_detected), rssi)
+        if self.representation == 'dbm':
+            return np.where(np.isnan(rssi), np.float32(self.not_detected),
+                            rssi)
+        floor = np.float32(self.not_detected)
+        above = np.clip(np.nan_to_num(rssi - floor, nan=0.0), 0.0, None)
+        if self.representation == 'powed':
+            out = (above / -floor) ** np.float32(np.e)
+        else:
+            out = np.expm1(above / 24) / np.expm1(-floor / 24)
+        return out.astype(np.float32)
 
     def fit(self, rssi):
         """Learn mean and std from training scans."""
@@ -48,7 +71,8 @@ class RssiScaler:
 
     def params(self):
         """Return the JSON-able parameters (arrays go separately)."""
-        return {'not_detected': self.not_detected, 'scaling': self.scaling}
+        return {'not_detected': self.not_detected, 'scaling': self.scaling,
+                'representation': self.representation}
 
     def arrays(self):
         """Return the fitted arrays, keyed by name."""
@@ -57,7 +81,8 @@ class RssiScaler:
     @classmethod
     def restore(cls, params, arrays):
         """Rebuild a fitted scaler from :meth:`params` and :meth:`arrays`."""
-        scaler = cls(params['not_detected'], params['scaling'])
+        scaler = cls(params['not_detected'], params['scaling'],
+                     params.get('representation', 'dbm'))
         scaler.mean_ = arrays['scaler.mean']
         scaler.std_ = arrays['scaler.std']
         return scaler

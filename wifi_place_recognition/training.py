@@ -34,6 +34,11 @@ class TrainConfig:
     dropout: float = 0.2
     not_detected: float = -110.0
     scaling: str = 'joint'
+    representation: str = 'dbm'
+    augment_offset: float = 0.0   # dB, uniform +- per scan
+    augment_gain: float = 0.0     # fraction, uniform +- per scan
+    augment_noise: float = 0.0    # dB, normal std per reading
+    augment_dropout: float = 0.0  # probability to drop a detected AP
     sae_epochs: int = 20
     epochs: int = 40
     patience: int = 10
@@ -63,6 +68,9 @@ class TrainConfig:
              f'validation must be one of {VALIDATIONS}'),
             (0.0 < self.validation_fraction < 1.0,
              'validation fraction must be in (0, 1)'),
+            (min(self.augment_offset, self.augment_gain, self.augment_noise)
+             >= 0 and 0 <= self.augment_dropout < 1,
+             'augmentation amounts must be >= 0 (dropout < 1)'),
         ]
         for ok, message in checks:
             if not ok:
@@ -147,26 +155,67 @@ class PlaceNet(nn.Module):
                 for m in linears]
 
 
-def _batches(n, batch_size, generator):
-    order = torch.randperm(n, generator=generator)
-    return torch.split(order, batch_size)
+def augment(rssi, config, rng):
+    """
+    Return scans as another phone might see them (NaN = not detected).
+
+    Per scan a gain and an offset, per reading Gaussian noise and random
+    loss; readings pushed below the not-detected floor are lost.
+    """
+    n = len(rssi)
+    out = rssi * (1 + rng.uniform(-config.augment_gain, config.augment_gain,
+                                  (n, 1)))
+    out += rng.uniform(-config.augment_offset, config.augment_offset, (n, 1))
+    if config.augment_noise:
+        out += rng.normal(0, config.augment_noise, out.shape)
+    floor = config.not_detected if config.not_detected < 0 else -110.0
+    lost = (rng.random(out.shape) < config.augment_dropout) | (out < floor)
+    out[lost] = np.nan
+    return np.minimum(out, 0.0, out=out).astype(np.float32)
 
 
-def _pretrain_sae(net, x, config, generator, log):
-    sizes = (x.shape[1],) + config.sae_layers
+class _Batches:
+    """Shuffled mini-batches of network inputs, augmented if configured."""
+
+    def __init__(self, rssi, scaler, config):
+        self.config = config
+        self.augmenting = (config.augment_offset or config.augment_gain or
+                           config.augment_noise or config.augment_dropout)
+        self.rssi = rssi
+        self.inputs = None if self.augmenting else \
+            torch.as_tensor(scaler.transform(rssi))
+        self.scaler = scaler
+        self.generator = torch.Generator().manual_seed(config.seed)
+        self.rng = np.random.default_rng(config.seed)
+
+    def __len__(self):
+        return len(self.rssi)
+
+    def __iter__(self):
+        order = torch.randperm(len(self.rssi), generator=self.generator)
+        for idx in torch.split(order, self.config.batch_size):
+            if self.augmenting:
+                raw = augment(self.rssi[idx.numpy()], self.config, self.rng)
+                yield idx, torch.as_tensor(self.scaler.transform(raw))
+            else:
+                yield idx, self.inputs[idx]
+
+
+def _pretrain_sae(net, batches, config, log):
+    sizes = (batches.rssi.shape[1],) + config.sae_layers
     decoder = nn.Sequential(*_dense(sizes[::-1], config.activation)[:-1])
     sae = nn.Sequential(net.encoder, decoder)
     optimiser = torch.optim.Adam(sae.parameters(), lr=config.learning_rate)
     for epoch in range(1, config.sae_epochs + 1):
         total = 0.0
-        for idx in _batches(len(x), config.batch_size, generator):
+        for _, x in batches:
             optimiser.zero_grad()
-            loss = nn.functional.mse_loss(sae(x[idx]), x[idx])
+            loss = nn.functional.mse_loss(sae(x), x)
             loss.backward()
             optimiser.step()
-            total += loss.item() * len(idx)
+            total += loss.item() * len(x)
         log(f'sae epoch {epoch:3d}/{config.sae_epochs}  '
-            f'reconstruction mse {total / len(x):.4f}')
+            f'reconstruction mse {total / len(batches):.4f}')
 
 
 def _predict_labels(net, x, classes):
@@ -177,23 +226,23 @@ def _predict_labels(net, x, classes):
     return classes[best, 0], classes[best, 1]
 
 
-def _fit(x, y, config, epochs, val=None, classes=None, log=print):
+def _fit(rssi, y, scaler, config, epochs, val, classes, log):
     """Train a fresh network; with ``val``, keep the best epoch."""
     torch.manual_seed(config.seed)
-    generator = torch.Generator().manual_seed(config.seed)
-    net = PlaceNet(x.shape[1], len(classes), config)
-    _pretrain_sae(net, x, config, generator, log)
+    batches = _Batches(rssi, scaler, config)
+    net = PlaceNet(rssi.shape[1], len(classes), config)
+    _pretrain_sae(net, batches, config, log)
     optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
     best = (-1.0, 0, None, {})
     for epoch in range(1, epochs + 1):
         total = 0.0
-        for idx in _batches(len(x), config.batch_size, generator):
+        for idx, x in batches:
             optimiser.zero_grad()
-            loss = nn.functional.cross_entropy(net(x[idx]), y[idx])
+            loss = nn.functional.cross_entropy(net(x), y[idx])
             loss.backward()
             optimiser.step()
             total += loss.item() * len(idx)
-        line = f'epoch {epoch:3d}/{epochs}  loss {total / len(x):.4f}'
+        line = f'epoch {epoch:3d}/{epochs}  loss {total / len(rssi):.4f}'
         if val is not None:
             xv, bv, fv = val
             scores = accuracies(bv, fv, *_predict_labels(net, xv, classes))
@@ -238,23 +287,24 @@ def train(fp, config, log=print):
         report.validation_phones = sorted(
             int(p) for p in np.unique(fp.meta['PHONEID'][held]))
 
-    scaler = RssiScaler(config.not_detected, config.scaling)
+    scaler = RssiScaler(config.not_detected, config.scaling,
+                        config.representation)
     scaler.fit(fp.rssi[~held])
-    x_all = torch.as_tensor(scaler.transform(fp.rssi))
     val = None
     if held.any():
-        val = (x_all[held], fp.building[held], fp.floor[held])
+        val = (torch.as_tensor(scaler.transform(fp.rssi[held])),
+               fp.building[held], fp.floor[held])
         log(f'training on {report.train_samples} scans, selecting on '
             f'{report.validation_samples} held-out scans '
             f'({config.validation})')
     net, report.best_epoch, report.validation = _fit(
-        x_all[~held], y_all[~held], config, config.epochs, val, classes, log)
+        fp.rssi[~held], y_all[~held], scaler, config, config.epochs, val,
+        classes, log)
     if config.refit and held.any():
         log(f'refit on all {len(fp)} scans for {report.best_epoch} epochs')
         scaler.fit(fp.rssi)
-        x_all = torch.as_tensor(scaler.transform(fp.rssi))
-        net, _, _ = _fit(x_all, y_all, config, report.best_epoch, None,
-                         classes, log)
+        net, _, _ = _fit(fp.rssi, y_all, scaler, config, report.best_epoch,
+                         None, classes, log)
     report.seconds = time.perf_counter() - start
     provenance = {
         'config': asdict(config),
