@@ -79,13 +79,17 @@ class Client:
                 pass
         raise AssertionError(proc.stop()[1])
 
-    def send(self, names, rssi, frame_id='wlan0', timeout=5.0):
-        """Publish one scan; return the node's DiagnosticStatus for it."""
+    def scan(self, names, rssi, frame_id='wlan0'):
+        """Return the next scan message, stamped with a new sequence number."""
         self.seq += 1
         msg = JointState(name=list(names), position=[float(v) for v in rssi])
         msg.header.stamp.sec = self.seq
         msg.header.frame_id = frame_id
-        self.pub.publish(msg)
+        return msg
+
+    def send(self, names, rssi, frame_id='wlan0', timeout=5.0):
+        """Publish one scan; return the node's DiagnosticStatus for it."""
+        self.pub.publish(self.scan(names, rssi, frame_id))
         seq = self.seq
         assert wait_until(lambda: seq in self.answers, timeout, self.node)
         return self.answers[seq].status[0]

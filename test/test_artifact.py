@@ -2,24 +2,14 @@
 
 import io
 import json
-import pickle
 import zipfile
 
+from conftest import hostile_pickle, Payload
 import numpy as np
 import pytest
 from wifi_place_recognition.artifact import (
     load_model, ModelFileError, save_model)
 from wifi_place_recognition.resources import default_model_path
-
-
-class _Payload:
-    """Pickles to a call that creates a marker file when unpickled."""
-
-    def __init__(self, marker):
-        self.marker = str(marker)
-
-    def __reduce__(self):
-        return (open, (self.marker, 'w'))
 
 
 def test_round_trip_keeps_predictions(synthetic, tmp_path):
@@ -110,12 +100,11 @@ def test_wrong_ap_count_is_refused_even_with_a_valid_checksum(
 
 def test_pickle_payloads_never_run(tmp_path):
     marker = tmp_path / 'PWNED'
-    payload = pickle.dumps(_Payload(marker))
     raw = tmp_path / 'model.npz'
-    raw.write_bytes(payload)
+    raw.write_bytes(hostile_pickle(marker))
     # The same payload as an object array inside a real npz.
     buf = io.BytesIO()
-    np.save(buf, np.array([_Payload(marker)], dtype=object),
+    np.save(buf, np.array([Payload(marker)], dtype=object),
             allow_pickle=True)
     inner = tmp_path / 'inner.npz'
     with zipfile.ZipFile(inner, 'w') as zf:

@@ -66,3 +66,8 @@ def test_pip_installed_console_script_answers(ros, tmp_path):
 def status_ok(status):
     """Return True if the status is an answer (not a rejection)."""
     return status.message.startswith('building ')
+
+
+def test_launch_file_is_valid_python():
+    source = (REPO / 'launch' / 'classifier.launch.py').read_text()
+    compile(source, 'classifier.launch.py', 'exec')

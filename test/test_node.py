@@ -3,7 +3,8 @@
 import csv
 import signal
 
-from conftest import dataset_file, python_module, run, wait_until
+from conftest import (dataset_file, hostile_pickle, python_module, REPO, run,
+                      wait_until)
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
@@ -140,16 +141,37 @@ def test_clean_shutdown(ros, synthetic, tmp_path, sig):
     assert 'Traceback' not in log
 
 
-@pytest.mark.parametrize('content', [None, b'', b'\x80\x04garbage'])
+@pytest.mark.parametrize('content', ['missing', 'empty', 'pickle'])
 def test_bad_model_path_is_one_clear_error(tmp_path, content):
     path = tmp_path / 'model.npz'
-    if content is not None:
-        path.write_bytes(content)
+    marker = tmp_path / 'PWNED'
+    if content == 'empty':
+        path.write_bytes(b'')
+    elif content == 'pickle':
+        path.write_bytes(hostile_pickle(marker))
     result = run(python_module('classifier_node', '--ros-args', '-p',
                                f'model_path:={path}'), timeout=30)
     assert result.returncode == 1
     assert 'cannot load model' in result.stderr and str(path) in result.stderr
     assert 'Traceback' not in result.stderr
+    assert not marker.exists()
+
+
+def test_params_file_is_read(ros, tmp_path):
+    params = tmp_path / 'params.yaml'
+    params.write_text((REPO / 'config' / 'classifier_node.yaml').read_text()
+                      .replace('min_known_aps: 3', 'min_known_aps: 500'))
+    proc = NodeProcess(tmp_path, python_module(
+        'classifier_node', '--ros-args', '--params-file', params),
+        'classifier_node')
+    client = Client(ros, proc.name)
+    try:
+        status = client.wait_ready(proc, (['WAP001'], [-60.0]))
+    finally:
+        client.close()
+        code, log = proc.stop()
+    assert 'only 1 known APs (< 500)' in status.message, log
+    assert code == 0
 
 
 def test_closed_loop_matches_evaluate_model(tmp_path):

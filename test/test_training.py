@@ -3,7 +3,8 @@
 import csv
 import json
 
-from conftest import dataset_file, FAST, python_module, run, synthetic_csv
+from conftest import (dataset_file, FAST, hostile_pickle, python_module, run,
+                      synthetic_csv)
 import numpy as np
 import pytest
 import torch
@@ -116,6 +117,12 @@ def test_train_then_evaluate_on_the_command_line(tmp_path):
     ('WAP1,FLOOR,BUILDINGID\n-50,1,0\n-60,1\n', 'row 3 has 2 fields'),
     ('', 'empty file'),
     ('WAP1,FLOOR,BUILDINGID\n-50,1,0\n-60,1,0\n', 'only one building/floor'),
+    ('WAP1,FLOOR,BUILDINGID\n-50,1,0\n-60,1,0\n-70,2,0\n',
+     'row 4, columns BUILDINGID/FLOOR: building 0, floor 2 has 1 scan(s)'),
+    ('WAP1,FLOOR,BUILDINGID\n100,1,0\n100,2,0\n', 'no scan detects any AP'),
+    ('WAP1,WAP2,FLOOR,BUILDINGID\n', 'no data rows'),
+    ('WAP1,WAP1,FLOOR,BUILDINGID\n-50,-50,1,0\n', "'WAP1' appears twice"),
+    ('WAP1\tFLOOR\tBUILDINGID\n-50\t1\t0\n', 'comma-separated'),
 ])
 def test_train_model_bad_csv_exits_2_and_writes_nothing(
         tmp_path, content, message):
@@ -134,8 +141,14 @@ def test_evaluate_model_bad_inputs_exit_2_without_traceback(
     data, model = synthetic
     garbage = tmp_path / 'garbage.npz'
     garbage.write_bytes(b'\x00' * 100)
+    hostile = tmp_path / 'hostile.npz'
+    hostile.write_bytes(hostile_pickle(tmp_path / 'PWNED'))
+    truncated = tmp_path / 'truncated.npz'
+    truncated.write_bytes(model.read_bytes()[:5000])
     for args, message in [
             (['--model', garbage, '--data', data], 'garbage.npz'),
+            (['--model', hostile, '--data', data], 'hostile.npz'),
+            (['--model', truncated, '--data', data], 'truncated.npz'),
             (['--model', model, '--data', tmp_path / 'none.csv'],
              'cannot read'),
             (['--model', model], 'no data given')]:
@@ -143,3 +156,4 @@ def test_evaluate_model_bad_inputs_exit_2_without_traceback(
         assert result.returncode == 2, args
         assert message in result.stderr
         assert 'Traceback' not in result.stderr
+    assert not (tmp_path / 'PWNED').exists()

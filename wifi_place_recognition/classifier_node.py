@@ -34,6 +34,24 @@ LEVELS = {OK: DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN}
 THROTTLE_S = 5.0
 
 
+def _memory_mib():
+    """Return (resident, peak resident) MiB of this process (Linux), or NaN.
+
+    From /proc/self/status: unlike getrusage's ru_maxrss, VmHWM is not
+    inherited from the parent through fork and exec.
+    """
+    found = {}
+    try:
+        with open('/proc/self/status') as f:
+            for line in f:
+                key, _, value = line.partition(':')
+                if key in ('VmRSS', 'VmHWM'):
+                    found[key] = int(value.split()[0]) / 1024
+    except OSError:
+        pass
+    return found.get('VmRSS', math.nan), found.get('VmHWM', math.nan)
+
+
 def _kv(key, value):
     return KeyValue(key=key, value=str(value))
 
@@ -183,12 +201,15 @@ class ClassifierNode(Node):
             counts = dict(self.counts)
         provenance = self.recognizer.model.provenance
         selection = provenance.get('selection', {})
+        rss, peak = _memory_mib()
         values = [_kv(f'scans_{k}', counts.get(k, 0)) for k in
                   ('received', 'answered', 'rejected', 'dropped')]
         values += [_kv(f'rejected/{r}', counts.get(f'rejected/{r}', 0))
                    for r in REJECT_REASONS + ('internal_error',)]
         values += [
             _kv('last_latency_ms', f'{self.last_latency_ms:.3f}'),
+            _kv('rss_mib', f'{rss:.1f}'),
+            _kv('peak_rss_mib', f'{peak:.1f}'),
             _kv('model_path', self.model_path),
             _kv('model_created', provenance.get('created', '')),
             _kv('model_training_data_sha256',

@@ -169,6 +169,32 @@ def parse_fingerprints(text, source=('<string>', b'')):
                         hashlib.sha256(raw).hexdigest())
 
 
+def check_trainable(fp, min_scans=2):
+    """Raise :class:`DataError` unless ``fp`` can train a classifier.
+
+    Needs scans that detect an AP, at least two building/floor classes, and
+    ``min_scans`` scans per class (a class with one scan is usually a typo
+    in a label).
+    """
+    rows = np.flatnonzero(~fp.empty_rows)
+    if not len(rows):
+        raise DataError(f'{fp.source}: no scan detects any AP')
+    labels = fp.building[rows] * 1000 + fp.floor[rows]
+    classes, first, counts = np.unique(labels, return_index=True,
+                                       return_counts=True)
+    if len(classes) < 2:
+        raise DataError(f'{fp.source}: only one building/floor class '
+                        f'(building {classes[0] // 1000}, floor '
+                        f'{classes[0] % 1000}); need at least two')
+    for label, i, count in zip(classes, first, counts):
+        if count < min_scans:
+            raise DataError(
+                f'{fp.source}: row {rows[i] + 2}, columns BUILDINGID/FLOOR: '
+                f'building {label // 1000}, floor {label % 1000} has '
+                f'{count} scan(s), fewer than {min_scans} (a typo in a '
+                f'label?)')
+
+
 def _check_header(header, name):
     seen = {}
     for i, h in enumerate(header):

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from .fingerprints import check_trainable
 from .metrics import accuracies
 from .model import Layer, PlaceModel
 from .preprocessing import RssiScaler
@@ -267,16 +268,12 @@ def train(fp, config, log=print):
     start = time.perf_counter()
     if config.threads:
         torch.set_num_threads(config.threads)
+    check_trainable(fp)
     report = TrainReport()
     usable = ~fp.empty_rows
     report.dropped_empty = int((~usable).sum())
     fp = fp.subset(usable)
-    if len(fp) == 0:
-        raise ValueError(f'{fp.source}: no scan detects any AP')
     classes = np.unique(np.stack([fp.building, fp.floor], axis=1), axis=0)
-    if len(classes) < 2:
-        raise ValueError(f'{fp.source}: only one building/floor class; '
-                         f'need at least two')
     class_index = {tuple(c): i for i, c in enumerate(classes)}
     y_all = torch.as_tensor([class_index[(b, f)]
                              for b, f in zip(fp.building, fp.floor)])
