@@ -35,7 +35,8 @@ THROTTLE_S = 5.0
 
 
 def _memory_mib():
-    """Return (resident, peak resident) MiB of this process (Linux), or NaN.
+    """
+    Return (resident, peak resident) MiB of this process (Linux), or NaN.
 
     From /proc/self/status: unlike getrusage's ru_maxrss, VmHWM is not
     inherited from the parent through fork and exec.

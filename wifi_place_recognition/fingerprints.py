@@ -170,7 +170,8 @@ def parse_fingerprints(text, source=('<string>', b'')):
 
 
 def check_trainable(fp, min_scans=2):
-    """Raise :class:`DataError` unless ``fp`` can train a classifier.
+    """
+    Raise :class:`DataError` unless ``fp`` can train a classifier.
 
     Needs scans that detect an AP, at least two building/floor classes, and
     ``min_scans`` scans per class (a class with one scan is usually a typo
