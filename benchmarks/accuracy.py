@@ -37,6 +37,7 @@ PAPER = {'SAE default (paper: 0.92)': 0.92,
 
 AUG = dict(augment_offset=10.0, augment_gain=0.1, augment_noise=2.0,
            augment_dropout=0.1)
+AUG_EXP = dict(AUG, representation='exponential')
 SUITES = {
     'default': {
         'SAE default': {},
@@ -65,6 +66,15 @@ SUITES = {
         'augment + exponential': dict(AUG, representation='exponential'),
         'augment, no SAE': dict(AUG, sae_epochs=0),
         'augment, dropout .5': dict(AUG, dropout=0.5),
+    },
+    'search2': {
+        'augment + exponential, ensemble 3': dict(AUG_EXP, ensemble=3),
+        'augment + exponential, ensemble 3, refit': dict(AUG_EXP, ensemble=3,
+                                                         refit=True),
+        'augment + exponential, no SAE': dict(AUG_EXP, sae_epochs=0),
+        'stronger augment + exponential': dict(
+            AUG_EXP, augment_offset=15.0, augment_gain=0.2,
+            augment_noise=3.0, augment_dropout=0.2),
     },
 }
 

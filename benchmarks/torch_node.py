@@ -14,22 +14,27 @@ from wifi_place_recognition.classifier_node import ClassifierNode
 from wifi_place_recognition.training import TORCH_ACTIVATIONS
 
 
-def torch_predict_proba(model):
-    """Return a predict_proba that runs ``model``'s layers in torch."""
+def _torch_net(layers):
     modules = []
-    for layer in model.layers:
+    for layer in layers:
         linear = torch.nn.Linear(*layer.weight.shape[::-1])
         linear.weight.data = torch.from_numpy(layer.weight)
         linear.bias.data = torch.from_numpy(layer.bias)
         modules.append(linear)
         if layer.activation != 'linear':
             modules.append(TORCH_ACTIVATIONS[layer.activation]())
-    net = torch.nn.Sequential(*modules).eval()
+    return torch.nn.Sequential(*modules).eval()
+
+
+def torch_predict_proba(model):
+    """Return a predict_proba that runs ``model``'s networks in torch."""
+    nets = [_torch_net(layers) for layers in model.members]
 
     def predict_proba(rssi):
         with torch.no_grad():
             x = torch.from_numpy(model.scaler.transform(rssi))
-            return torch.softmax(net(x), dim=1).numpy()
+            return (sum(torch.softmax(net(x), dim=1) for net in nets)
+                    / len(nets)).numpy()
     return predict_proba
 
 

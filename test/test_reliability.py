@@ -29,7 +29,7 @@ i = 0
 while True:
     i += 1
     save_model(PlaceModel(tuple(f'ap{j}' for j in range(n)), scaler,
-                          layers, np.array([[0, 0], [0, 1], [1, 0]]),
+                          [layers], np.array([[0, 0], [0, 1], [1, 0]]),
                           {'write': i}), sys.argv[1])
     print(i, flush=True)
 '''

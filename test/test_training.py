@@ -10,6 +10,7 @@ import pytest
 import torch
 from wifi_place_recognition.artifact import load_model
 from wifi_place_recognition.fingerprints import read_fingerprints
+from wifi_place_recognition.model import ScanForward
 from wifi_place_recognition.training import (
     split_validation, train, TrainConfig)
 
@@ -17,10 +18,11 @@ SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
              epochs=15)
 
 
-def _torch_proba(net, model, rssi):
+def _torch_proba(nets, model, rssi):
+    x = torch.as_tensor(model.scaler.transform(rssi))
     with torch.no_grad():
-        logits = net(torch.as_tensor(model.scaler.transform(rssi)))
-    return torch.softmax(logits, dim=1).numpy()
+        return (sum(torch.softmax(net(x), dim=1) for net in nets)
+                / len(nets)).numpy()
 
 
 def test_same_seed_same_model(tmp_path):
@@ -28,18 +30,23 @@ def test_same_seed_same_model(tmp_path):
     a, _, ra = train(fp, TrainConfig(**SMALL), log=lambda s: None)
     b, _, rb = train(fp, TrainConfig(**SMALL), log=lambda s: None)
     assert ra.validation == rb.validation and ra.best_epoch == rb.best_epoch
-    for la, lb in zip(a.layers, b.layers):
+    for la, lb in zip(a.members[0], b.members[0]):
         np.testing.assert_array_equal(la.weight, lb.weight)
 
 
 def test_learns_the_synthetic_building_and_numpy_matches_torch(tmp_path):
     fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv'))
     test = read_fingerprints(synthetic_csv(tmp_path / 'b.csv', seed=0))
-    model, net, report = train(fp, TrainConfig(**SMALL), log=lambda s: None)
+    model, nets, report = train(fp, TrainConfig(ensemble=2, refit=True,
+                                                 **SMALL), log=lambda s: None)
     _, _, _, proba = model.predict(test.rssi)
+    assert len(model.members) == len(nets) == 2
     assert report.validation['building_floor_accuracy'] > 0.9
-    np.testing.assert_allclose(proba, _torch_proba(net, model, test.rssi),
-                               atol=1e-5)
+    reference = _torch_proba(nets, model, test.rssi)
+    np.testing.assert_allclose(proba, reference, atol=1e-5)
+    forward = ScanForward(model)
+    np.testing.assert_allclose([forward(row) for row in test.rssi],
+                               reference, atol=1e-5)
 
 
 def test_phone_split_holds_out_whole_phones_and_keeps_every_class(tmp_path):
@@ -69,12 +76,17 @@ def test_bad_config_values_are_refused():
 def test_numpy_matches_torch_on_real_data():
     fp = read_fingerprints(dataset_file('trainingData.csv'))
     test = read_fingerprints(dataset_file('validationData-public.csv'))
-    model, net, _ = train(fp, TrainConfig(sae_epochs=1, epochs=2),
-                          log=lambda s: None)
+    model, nets, _ = train(fp, TrainConfig(sae_epochs=1, epochs=2),
+                           log=lambda s: None)
     proba = model.predict_proba(test.rssi)
-    ref = _torch_proba(net, model, test.rssi)
+    ref = _torch_proba(nets, model, test.rssi)
     assert np.abs(proba - ref).max() <= 1e-5
     assert (proba.argmax(1) == ref.argmax(1)).all()
+    # The node's one-scan path (sparse first layer) agrees as well.
+    forward = ScanForward(model)
+    single = np.stack([forward(row) for row in test.rssi])
+    assert np.abs(single - ref).max() <= 1e-5
+    assert (single.argmax(1) == ref.argmax(1)).all()
 
 
 def test_shipped_model_reaches_the_paper_level():

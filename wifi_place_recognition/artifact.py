@@ -41,17 +41,20 @@ def _digest(header, arrays):
 def save_model(model, path):
     """Write ``model`` to ``path`` atomically."""
     arrays = dict(model.scaler.arrays())
-    layers = []
-    for i, layer in enumerate(model.layers):
-        arrays[f'layer{i}.weight'] = layer.weight.astype(np.float32)
-        arrays[f'layer{i}.bias'] = layer.bias.astype(np.float32)
-        layers.append({'weight': f'layer{i}.weight',
-                       'bias': f'layer{i}.bias',
-                       'activation': layer.activation})
+    members = []
+    for m, layers in enumerate(model.members):
+        specs = []
+        for i, layer in enumerate(layers):
+            name = f'member{m}.layer{i}'
+            arrays[f'{name}.weight'] = layer.weight.astype(np.float32)
+            arrays[f'{name}.bias'] = layer.bias.astype(np.float32)
+            specs.append({'weight': f'{name}.weight', 'bias': f'{name}.bias',
+                          'activation': layer.activation})
+        members.append(specs)
     header = {'format': FORMAT, 'schema_version': SCHEMA_VERSION,
               'ap_ids': list(model.ap_ids),
               'classes': np.asarray(model.classes).tolist(),
-              'preprocessing': model.scaler.params(), 'layers': layers,
+              'preprocessing': model.scaler.params(), 'members': members,
               'provenance': model.provenance}
     header['sha256'] = _digest(header, arrays)
     arrays['header'] = np.frombuffer(json.dumps(header).encode(), np.uint8)
@@ -137,8 +140,17 @@ def _build(header, arrays):
             raise ModelFileError(f'{name} has shape {arrays[name].shape}, '
                                  f'expected ({len(ap_ids)},) for '
                                  f'{len(ap_ids)} APs')
-    layers, width = [], len(ap_ids)
-    for spec in header['layers']:
+    members = [_member(specs, arrays, len(ap_ids), len(classes))
+               for specs in header['members']]
+    if not members:
+        raise ModelFileError('the model has no network')
+    return PlaceModel(ap_ids, scaler, members, classes,
+                      header.get('provenance', {}))
+
+
+def _member(specs, arrays, n_inputs, n_classes):
+    layers, width = [], n_inputs
+    for spec in specs:
         w, b = arrays[spec['weight']], arrays[spec['bias']]
         if spec['activation'] not in ACTIVATIONS:
             raise ModelFileError(f'unknown activation {spec["activation"]!r}')
@@ -147,8 +159,7 @@ def _build(header, arrays):
                                  f'{w.shape}, expected (*, {width})')
         layers.append(Layer(w, b, spec['activation']))
         width = w.shape[0]
-    if width != len(classes):
-        raise ModelFileError(f'the network has {width} outputs but '
-                             f'{len(classes)} classes')
-    return PlaceModel(ap_ids, scaler, layers, classes,
-                      header.get('provenance', {}))
+    if width != n_classes:
+        raise ModelFileError(f'a network has {width} outputs but there are '
+                             f'{n_classes} classes')
+    return layers

@@ -5,13 +5,13 @@ Subscribes ``wifi/scan`` (``sensor_msgs/JointState``: ``name`` = AP id,
 ``position`` = RSSI dBm) and publishes one ``diagnostic_msgs/DiagnosticArray``
 per processed scan on ``~/place`` and ``/diagnostics``, plus a 1 Hz health
 status on ``/diagnostics``. Inference is a numpy forward pass: torch is
-never imported. When scans arrive faster than they are processed, the
-newest is processed and the ones it replaced are counted as dropped.
+never imported. Each scan is processed in the subscription callback; when
+more scans are already queued by then, only the newest is processed and the
+others are counted as dropped.
 """
 
 import math
 import sys
-import threading
 import time
 from collections import Counter
 
@@ -32,6 +32,7 @@ from .scan import REJECT_REASONS, ScanRejected
 
 LEVELS = {OK: DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN}
 THROTTLE_S = 5.0
+MAX_DRAIN = 100_000
 
 
 def _memory_mib():
@@ -100,19 +101,13 @@ class ClassifierNode(Node):
             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
-        self.create_subscription(
+        self._scan_sub = self.create_subscription(
             JointState, 'wifi/scan', self._on_scan, qos_profile_sensor_data,
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.create_timer(1.0, self._publish_health)
 
         self.counts = Counter(received=0, answered=0, rejected=0, dropped=0)
         self.last_latency_ms = math.nan
-        self._lock = threading.Lock()
-        self._pending = None
-        self._wake = threading.Event()
-        self._stopping = False
-        self._worker = threading.Thread(target=self._work, daemon=True)
-        self._worker.start()
         provenance = self.recognizer.model.provenance
         self.get_logger().info(
             f'model {model_path}: {len(self.recognizer.model.ap_ids)} APs, '
@@ -138,23 +133,31 @@ class ClassifierNode(Node):
 
     # scans ----------------------------------------------------------------
     def _on_scan(self, msg):
-        with self._lock:
-            self.counts['received'] += 1
-            if self._pending is not None:
-                self.counts['dropped'] += 1
-            self._pending = (msg, time.perf_counter())
-        self._wake.set()
+        received_at = time.perf_counter()
+        self.counts['received'] += 1
+        newest = self._take_newest()
+        if newest is not None:
+            msg, received_at = newest, time.perf_counter()
+        self._process(msg, received_at)
 
-    def _work(self):
-        while True:
-            self._wake.wait()
-            self._wake.clear()
-            if self._stopping:
-                return
-            with self._lock:
-                pending, self._pending = self._pending, None
-            if pending is not None:
-                self._process(*pending)
+    def _take_newest(self):
+        """
+        Take every scan already queued; return the newest, or None.
+
+        Scans that arrived while the previous one was processed are waiting
+        in the subscription: all but the newest are counted as dropped. This
+        takes them the way rclpy's executor does (``handle.take_message``).
+        """
+        sub, newest = self._scan_sub, None
+        with sub.handle:
+            for _ in range(MAX_DRAIN):
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                if taken is None:
+                    break
+                self.counts['received'] += 1
+                self.counts['dropped'] += 1
+                newest = taken[0]
+        return newest
 
     def _process(self, msg, received_at):
         status = DiagnosticStatus(name=self.status_name,
@@ -179,17 +182,15 @@ class ClassifierNode(Node):
             ] + [_kv(k, f'{p:.6f}') for k, p in
                  zip(self.prob_keys, place.probabilities)]
             self.last_latency_ms = latency_ms
-            with self._lock:
-                self.counts['answered'] += 1
+            self.counts['answered'] += 1
         out = DiagnosticArray(status=[status])
         out.header.stamp = msg.header.stamp
         self.place_pub.publish(out)
         self.diag_pub.publish(out)
 
     def _reject(self, status, reason, detail):
-        with self._lock:
-            self.counts['rejected'] += 1
-            self.counts[f'rejected/{reason}'] += 1
+        self.counts['rejected'] += 1
+        self.counts[f'rejected/{reason}'] += 1
         status.level = DiagnosticStatus.ERROR
         status.message = f'scan rejected: {detail}'
         status.values = [_kv('reason', reason)]
@@ -198,8 +199,7 @@ class ClassifierNode(Node):
 
     # health ---------------------------------------------------------------
     def _publish_health(self):
-        with self._lock:
-            counts = dict(self.counts)
+        counts = self.counts
         provenance = self.recognizer.model.provenance
         selection = provenance.get('selection', {})
         rss, peak = _memory_mib()
@@ -228,13 +228,6 @@ class ClassifierNode(Node):
         out = DiagnosticArray(status=[status])
         out.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(out)
-
-    def destroy_node(self):
-        """Stop the worker thread, then the node."""
-        self._stopping = True
-        self._wake.set()
-        self._worker.join(timeout=2.0)
-        return super().destroy_node()
 
 
 def main(args=None):

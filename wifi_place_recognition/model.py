@@ -35,23 +35,32 @@ class Layer:
 
 @dataclass
 class PlaceModel:
-    """Scaler + dense layers + softmax over (building, floor) classes."""
+    """
+    Scaler + networks of dense layers + softmax over (building, floor).
+
+    ``members`` holds one or more networks (lists of :class:`Layer`); the
+    probabilities are the mean of their softmax outputs.
+    """
 
     ap_ids: tuple
     scaler: RssiScaler
-    layers: list
+    members: list
     classes: np.ndarray           # int64 (k, 2): building, floor per output
     provenance: dict = field(default_factory=dict)
 
     def predict_proba(self, rssi):
         """Return class probabilities, shape (n, k), for (n, n_aps) RSSI."""
-        x = self.scaler.transform(np.atleast_2d(rssi))
-        for layer in self.layers:
-            x = ACTIVATIONS[layer.activation](x @ layer.weight.T + layer.bias)
-        x -= x.max(axis=1, keepdims=True)
-        np.exp(x, out=x)
-        x /= x.sum(axis=1, keepdims=True)
-        return x
+        inputs = self.scaler.transform(np.atleast_2d(rssi))
+        total = 0.0
+        for layers in self.members:
+            x = inputs
+            for layer in layers:
+                x = ACTIVATIONS[layer.activation](
+                    x @ layer.weight.T + layer.bias)
+            x -= x.max(axis=1, keepdims=True)
+            np.exp(x, out=x)
+            total = total + x / x.sum(axis=1, keepdims=True)
+        return total / len(self.members)
 
     def predict(self, rssi):
         """Return (building, floor, confidence, probabilities) arrays."""
@@ -64,3 +73,40 @@ class PlaceModel:
     def class_names(self):
         """Return ``B{building}F{floor}`` for every output."""
         return [f'B{b}F{f}' for b, f in self.classes]
+
+
+class ScanForward:
+    """
+    The forward pass of one scan, touching only the detected APs.
+
+    An undetected AP's network input is a constant, so its part of the
+    first layer is folded into the bias once; a scan (which detects a few
+    dozen of hundreds of APs) then costs a gather of those columns instead
+    of the whole first matrix. Same probabilities as
+    :meth:`PlaceModel.predict_proba` up to float32 rounding.
+    """
+
+    def __init__(self, model):
+        self.model = model
+        empty = np.full((1, len(model.ap_ids)), np.nan, np.float32)
+        self.blank = model.scaler.transform(empty)[0]
+        self.first = [(np.ascontiguousarray(layers[0].weight.T),
+                       layers[0].bias + layers[0].weight @ self.blank,
+                       ACTIVATIONS[layers[0].activation])
+                      for layers in model.members]
+
+    def __call__(self, rssi):
+        """Return class probabilities (k,) for one (n_aps,) RSSI vector."""
+        columns = np.flatnonzero(~np.isnan(rssi))
+        delta = self.model.scaler.transform(rssi[columns], columns) - \
+            self.blank[columns]
+        total = 0.0
+        for (weight_t, bias, activation), layers in zip(self.first,
+                                                        self.model.members):
+            x = activation(bias + delta @ weight_t[columns])
+            for layer in layers[1:]:
+                x = ACTIVATIONS[layer.activation](
+                    x @ layer.weight.T + layer.bias)
+            x = np.exp(x - x.max())
+            total = total + x / x.sum()
+        return total / len(self.model.members)

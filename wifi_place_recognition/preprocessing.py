@@ -61,9 +61,15 @@ class RssiScaler:
         self.std_ = np.where(std > 1e-6, std, 1.0).astype(np.float32)
         return self
 
-    def transform(self, rssi):
-        """Return standardised float32 inputs, shape (n, n_aps)."""
-        return (self.fill(rssi) - self.mean_) / self.std_
+    def transform(self, rssi, columns=None):
+        """
+        Return standardised float32 inputs, shape (n, n_aps).
+
+        With ``columns``, ``rssi`` holds only those APs' values (last axis).
+        """
+        if columns is None:
+            return (self.fill(rssi) - self.mean_) / self.std_
+        return (self.fill(rssi) - self.mean_[columns]) / self.std_[columns]
 
     def fit_transform(self, rssi):
         """Fit, then transform the same scans."""

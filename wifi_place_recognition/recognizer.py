@@ -4,6 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .model import ScanForward
 from .scan import ScanMapper
 
 OK, WARN = 'ok', 'warn'
@@ -36,6 +37,7 @@ class PlaceRecognizer:
     def __init__(self, model, min_confidence=0.5, min_known_aps=3,
                  max_aps=4096):
         self.model = model
+        self.forward = ScanForward(model)
         self.mapper = ScanMapper(model.ap_ids, max_aps)
         self.min_confidence = min_confidence
         self.min_known_aps = min_known_aps
@@ -43,7 +45,7 @@ class PlaceRecognizer:
     def classify(self, names, rssi):
         """Return a :class:`Place` for parallel AP name / RSSI sequences."""
         scan = self.mapper.map(names, rssi)
-        proba = self.model.predict_proba(scan.rssi[None, :])[0]
+        proba = self.forward(scan.rssi)
         best = int(proba.argmax())
         building, floor = (int(v) for v in self.model.classes[best])
         confidence = float(proba[best])

@@ -10,7 +10,7 @@ the training file is kept.
 """
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import torch
@@ -48,6 +48,7 @@ class TrainConfig:
     validation: str = 'phone'
     validation_fraction: float = 0.2
     refit: bool = False
+    ensemble: int = 1
     seed: int = 0
     threads: int = 0  # 0: torch's default
 
@@ -63,6 +64,7 @@ class TrainConfig:
             (0.0 <= self.dropout < 1.0, 'dropout must be in [0, 1)'),
             (self.sae_epochs >= 0 and self.epochs >= 1 and
              self.patience >= 1, 'epochs must be positive'),
+            (self.ensemble >= 1, 'ensemble must be at least 1'),
             (self.batch_size >= 1 and self.learning_rate > 0,
              'batch size and learning rate must be positive'),
             (self.validation in VALIDATIONS,
@@ -82,7 +84,7 @@ class TrainConfig:
 class TrainReport:
     """What happened during training, for the summary and provenance."""
 
-    best_epoch: int = 0
+    best_epoch: list = field(default_factory=list)  # one per member
     validation: dict = field(default_factory=dict)
     validation_phones: list = field(default_factory=list)
     train_samples: int = 0
@@ -219,11 +221,16 @@ def _pretrain_sae(net, batches, config, log):
             f'reconstruction mse {total / len(batches):.4f}')
 
 
-def _predict_labels(net, x, classes):
-    net.eval()
+def _predict_labels(nets, x, classes):
+    """Return (building, floor) from the mean softmax of ``nets``."""
     with torch.no_grad():
-        best = net(x).argmax(dim=1).numpy()
-    net.train()
+        proba = 0
+        for net in nets:
+            was_training = net.training
+            net.eval()
+            proba = proba + torch.softmax(net(x), dim=1)
+            net.train(was_training)
+    best = proba.argmax(dim=1).numpy()
     return classes[best, 0], classes[best, 1]
 
 
@@ -246,7 +253,7 @@ def _fit(rssi, y, scaler, config, epochs, val, classes, log):
         line = f'epoch {epoch:3d}/{epochs}  loss {total / len(rssi):.4f}'
         if val is not None:
             xv, bv, fv = val
-            scores = accuracies(bv, fv, *_predict_labels(net, xv, classes))
+            scores = accuracies(bv, fv, *_predict_labels([net], xv, classes))
             line += (f'  held-out building+floor '
                      f'{scores["building_floor_accuracy"]:.4f}')
             if scores['building_floor_accuracy'] > best[0]:
@@ -264,7 +271,13 @@ def _fit(rssi, y, scaler, config, epochs, val, classes, log):
 
 
 def train(fp, config, log=print):
-    """Train on :class:`Fingerprints`; return (PlaceModel, PlaceNet, report)."""
+    """
+    Train on :class:`Fingerprints`; return (PlaceModel, nets, report).
+
+    ``config.ensemble`` networks (seeds ``seed``, ``seed + 1`` …) are each
+    early-stopped on the held-out scans; with ``refit`` each is then
+    trained again from scratch on all scans for its selected epoch count.
+    """
     start = time.perf_counter()
     if config.threads:
         torch.set_num_threads(config.threads)
@@ -294,14 +307,28 @@ def train(fp, config, log=print):
         log(f'training on {report.train_samples} scans, selecting on '
             f'{report.validation_samples} held-out scans '
             f'({config.validation})')
-    net, report.best_epoch, report.validation = _fit(
-        fp.rssi[~held], y_all[~held], scaler, config, config.epochs, val,
-        classes, log)
+    nets, epochs = [], []
+    for k in range(config.ensemble):
+        member = replace(config, seed=config.seed + k)
+        if config.ensemble > 1:
+            log(f'ensemble member {k + 1}/{config.ensemble}')
+        net, best_epoch, _ = _fit(fp.rssi[~held], y_all[~held], scaler,
+                                  member, config.epochs, val, classes, log)
+        nets.append(net)
+        epochs.append(best_epoch)
+    report.best_epoch = epochs
+    if val is not None:
+        b, f = _predict_labels(nets, val[0], classes)
+        report.validation = accuracies(val[1], val[2], b, f)
     if config.refit and held.any():
-        log(f'refit on all {len(fp)} scans for {report.best_epoch} epochs')
         scaler.fit(fp.rssi)
-        net, _, _ = _fit(fp.rssi, y_all, scaler, config, report.best_epoch,
-                         None, classes, log)
+        nets = []
+        for k, n_epochs in enumerate(epochs):
+            log(f'refit {k + 1}/{config.ensemble} on all {len(fp)} scans '
+                f'for {n_epochs} epochs')
+            nets.append(_fit(fp.rssi, y_all, scaler,
+                             replace(config, seed=config.seed + k), n_epochs,
+                             None, classes, log)[0])
     report.seconds = time.perf_counter() - start
     provenance = {
         'config': asdict(config),
@@ -317,6 +344,7 @@ def train(fp, config, log=print):
         'versions': {'torch': torch.__version__, 'numpy': np.__version__},
         'created': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
     }
-    model = PlaceModel(fp.ap_ids, scaler, net.frozen_layers(), classes,
+    model = PlaceModel(fp.ap_ids, scaler,
+                       [net.frozen_layers() for net in nets], classes,
                        provenance)
-    return model, net, report
+    return model, nets, report
