@@ -37,8 +37,8 @@ def test_same_seed_same_model(tmp_path):
 def test_learns_the_synthetic_building_and_numpy_matches_torch(tmp_path):
     fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv'))
     test = read_fingerprints(synthetic_csv(tmp_path / 'b.csv', seed=0))
-    model, nets, report = train(fp, TrainConfig(ensemble=2, refit=True,
-                                                 **SMALL), log=lambda s: None)
+    config = TrainConfig(ensemble=2, refit=True, **SMALL)
+    model, nets, report = train(fp, config, log=lambda s: None)
     _, _, _, proba = model.predict(test.rssi)
     assert len(model.members) == len(nets) == 2
     assert report.validation['building_floor_accuracy'] > 0.9
