@@ -2,7 +2,6 @@
 
 import os
 from pathlib import Path
-import pickle
 import subprocess
 import sys
 import time
@@ -51,21 +50,6 @@ def synthetic_csv(path, scans_per_class=60, n_aps=24, seed=0, phones=4):
                                            str(s % phones)]))
     Path(path).write_text('\n'.join(lines) + '\n')
     return path
-
-
-class Payload:
-    """Pickles to a call that creates a marker file when unpickled."""
-
-    def __init__(self, marker):
-        self.marker = str(marker)
-
-    def __reduce__(self):
-        return (open, (self.marker, 'w'))
-
-
-def hostile_pickle(marker):
-    """Return pickle bytes that would create ``marker`` if unpickled."""
-    return pickle.dumps(Payload(marker))
 
 
 FAST = ['--sae-layers', '32,16', '--classifier-layers', '16',

@@ -3,12 +3,12 @@
 import csv
 import signal
 
-from conftest import (dataset_file, hostile_pickle, python_module, REPO, run,
-                      wait_until)
+from conftest import dataset_file, python_module, REPO, run, wait_until
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
 from ros_helpers import Client, NodeProcess
+from wifi_place_recognition.fuzz import hostile_model_files
 from wifi_place_recognition.artifact import load_model
 from wifi_place_recognition.fingerprints import read_fingerprints
 from wifi_place_recognition.replay_scans import status_values
@@ -141,19 +141,17 @@ def test_clean_shutdown(ros, synthetic, tmp_path, sig):
     assert 'Traceback' not in log
 
 
-@pytest.mark.parametrize('content', ['missing', 'empty', 'pickle'])
-def test_bad_model_path_is_one_clear_error(tmp_path, content):
-    path = tmp_path / 'model.npz'
+def test_bad_and_hostile_model_files_are_one_clear_error(synthetic, tmp_path):
     marker = tmp_path / 'PWNED'
-    if content == 'empty':
-        path.write_bytes(b'')
-    elif content == 'pickle':
-        path.write_bytes(hostile_pickle(marker))
-    result = run(python_module('classifier_node', '--ros-args', '-p',
-                               f'model_path:={path}'), timeout=30)
-    assert result.returncode == 1
-    assert 'cannot load model' in result.stderr and str(path) in result.stderr
-    assert 'Traceback' not in result.stderr
+    files = hostile_model_files(synthetic[1], tmp_path, marker)
+    files['missing'] = tmp_path / 'missing.npz'
+    for kind, path in files.items():
+        result = run(python_module('classifier_node', '--ros-args', '-p',
+                                   f'model_path:={path}'), timeout=30)
+        assert result.returncode == 1, kind
+        assert 'cannot load model' in result.stderr, kind
+        assert str(path) in result.stderr, kind
+        assert 'Traceback' not in result.stderr, kind
     assert not marker.exists()
 
 

@@ -13,26 +13,8 @@ from wifi_place_recognition.artifact import load_model
 from wifi_place_recognition.fuzz import fuzz_scans
 from wifi_place_recognition.replay_scans import status_values
 
-SAVE_LOOP = '''
-import sys
-import numpy as np
-from wifi_place_recognition.artifact import save_model
-from wifi_place_recognition.model import Layer, PlaceModel
-from wifi_place_recognition.preprocessing import RssiScaler
-n = 2000
-scaler = RssiScaler().fit(np.full((2, n), -60.0))
-layers = [Layer(np.ones((n, n), np.float32), np.zeros(n, np.float32),
-                'relu'),
-          Layer(np.ones((3, n), np.float32), np.zeros(3, np.float32),
-                'linear')]
-i = 0
-while True:
-    i += 1
-    save_model(PlaceModel(tuple(f'ap{j}' for j in range(n)), scaler,
-                          [layers], np.array([[0, 0], [0, 1], [1, 0]]),
-                          {'write': i}), sys.argv[1])
-    print(i, flush=True)
-'''
+SAVE_LOOP = ('import sys; from wifi_place_recognition.fuzz import '
+             'rewrite_forever; rewrite_forever(sys.argv[1])')
 
 
 def test_sigkill_while_saving_never_tears_the_model_file(tmp_path):

@@ -3,13 +3,13 @@
 import csv
 import json
 
-from conftest import (dataset_file, FAST, hostile_pickle, python_module, run,
-                      synthetic_csv)
+from conftest import dataset_file, FAST, python_module, run, synthetic_csv
 import numpy as np
 import pytest
 import torch
 from wifi_place_recognition.artifact import load_model
 from wifi_place_recognition.fingerprints import read_fingerprints
+from wifi_place_recognition.fuzz import hostile_model_files
 from wifi_place_recognition.model import ScanForward
 from wifi_place_recognition.training import (
     split_validation, train, TrainConfig)
@@ -151,16 +151,10 @@ def test_train_model_bad_csv_exits_2_and_writes_nothing(
 def test_evaluate_model_bad_inputs_exit_2_without_traceback(
         synthetic, tmp_path):
     data, model = synthetic
-    garbage = tmp_path / 'garbage.npz'
-    garbage.write_bytes(b'\x00' * 100)
-    hostile = tmp_path / 'hostile.npz'
-    hostile.write_bytes(hostile_pickle(tmp_path / 'PWNED'))
-    truncated = tmp_path / 'truncated.npz'
-    truncated.write_bytes(model.read_bytes()[:5000])
+    files = hostile_model_files(model, tmp_path, tmp_path / 'PWNED')
     for args, message in [
-            (['--model', garbage, '--data', data], 'garbage.npz'),
-            (['--model', hostile, '--data', data], 'hostile.npz'),
-            (['--model', truncated, '--data', data], 'truncated.npz'),
+            *[(['--model', path, '--data', data], str(path))
+              for path in files.values()],
             (['--model', model, '--data', tmp_path / 'none.csv'],
              'cannot read'),
             (['--model', model], 'no data given')]:

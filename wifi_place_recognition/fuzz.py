@@ -1,11 +1,17 @@
 """
-A seeded generator of malformed and random scans, for robustness tests.
+Faulty and hostile inputs, for the robustness tests and benchmark.
 
-Every kind of scan a faulty driver or a hostile peer could send:
-unequal arrays, NaN and infinities, huge and tiny values, empty and
-oversize arrays, non-ASCII and very long names, duplicate MACs, zero and
-negative stamps, mixed with plausible scans of the model's APs.
+Seeded malformed scans (unequal arrays, NaN and infinities, huge and tiny
+values, empty and oversize arrays, non-ASCII and very long names, duplicate
+MACs, zero and negative stamps, mixed with plausible scans), bad and
+hostile model files, and a writer to kill mid-write.
 """
+
+import io
+import json
+from pathlib import Path
+import pickle
+import zipfile
 
 import numpy as np
 from sensor_msgs.msg import JointState
@@ -61,3 +67,81 @@ def fuzz_scans(ap_ids, count, seed=0, oversize_every=2000):
         kind = 'oversize' if i % oversize_every == oversize_every - 1 else \
             kinds[int(rng.integers(0, len(kinds)))]
         yield fuzz_scan(kind, list(ap_ids), rng)
+
+
+class _Payload:
+    """Pickles to a call that creates ``marker`` when unpickled."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (open, (self.marker, 'w'))
+
+
+def hostile_model_files(valid, folder, marker):
+    """
+    Write bad model files derived from the ``valid`` one; return {kind: path}.
+
+    Kinds: truncated, empty, bit-flipped, wrong schema, wrong AP count (with
+    a matching checksum), and two pickle payloads that would create
+    ``marker`` if anything unpickled them.
+    """
+    from .artifact import _digest  # the checksum, to forge a consistent file
+    folder = Path(folder)
+    data = Path(valid).read_bytes()
+    files = {}
+
+    def write(kind, content):
+        files[kind] = folder / f'{kind}.npz'
+        files[kind].write_bytes(content)
+
+    write('truncated', data[:len(data) // 2])
+    write('empty', b'')
+    flipped = bytearray(data)
+    flipped[len(data) // 3] ^= 0x10
+    write('bit_flipped', bytes(flipped))
+    write('pickle', pickle.dumps(_Payload(marker)))
+    buf = io.BytesIO()
+    np.save(buf, np.array([_Payload(marker)], dtype=object),
+            allow_pickle=True)
+    with zipfile.ZipFile(folder / 'pickle_in_npz.npz', 'w') as zf:
+        zf.writestr('header.npy', buf.getvalue())
+    files['pickle_in_npz'] = folder / 'pickle_in_npz.npz'
+    with np.load(valid, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    header = json.loads(arrays.pop('header').tobytes())
+    for kind, change in (('wrong_schema', {'schema_version': 99}),
+                         ('wrong_ap_count',
+                          {'ap_ids': header['ap_ids'][:-1]})):
+        forged = {k: v for k, v in header.items() if k != 'sha256'}
+        forged.update(change)
+        forged['sha256'] = _digest(forged, arrays)
+        files[kind] = folder / f'{kind}.npz'
+        np.savez(files[kind], header=np.frombuffer(
+            json.dumps(forged).encode(), np.uint8), **arrays)
+    return files
+
+
+def rewrite_forever(path, n_aps=2000):
+    """
+    Save a large model to ``path`` again and again (for kill tests).
+
+    Prints the number of each completed write.
+    """
+    from .artifact import save_model
+    from .model import Layer, PlaceModel
+    from .preprocessing import RssiScaler
+    scaler = RssiScaler().fit(np.full((2, n_aps), -60.0))
+    layers = [Layer(np.ones((n_aps, n_aps), np.float32),
+                    np.zeros(n_aps, np.float32), 'relu'),
+              Layer(np.ones((3, n_aps), np.float32),
+                    np.zeros(3, np.float32), 'linear')]
+    ap_ids = tuple(f'ap{j}' for j in range(n_aps))
+    classes = np.array([[0, 0], [0, 1], [1, 0]])
+    write = 0
+    while True:
+        write += 1
+        save_model(PlaceModel(ap_ids, scaler, [layers], classes,
+                              {'write': write}), path)
+        print(write, flush=True)
