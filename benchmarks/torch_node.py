@@ -1,16 +1,15 @@
 """
 classifier_node with torch inference instead of numpy: a benchmark baseline.
 
-Same node, same model file; only ``predict_proba`` runs the frozen layers
-through torch. The shipped node never imports torch.
+Same node, same model file; only the recognizer's forward pass runs the
+frozen layers through torch (dense, as torch would). The shipped node never
+imports torch.
 """
 
 import sys
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 import torch
-from wifi_place_recognition.classifier_node import ClassifierNode
+from wifi_place_recognition.classifier_node import ClassifierNode, main
 from wifi_place_recognition.training import TORCH_ACTIVATIONS
 
 
@@ -26,32 +25,24 @@ def _torch_net(layers):
     return torch.nn.Sequential(*modules).eval()
 
 
-def torch_predict_proba(model):
-    """Return a predict_proba that runs ``model``'s networks in torch."""
+def torch_forward(model):
+    """Return a one-scan forward pass that runs ``model``'s nets in torch."""
     nets = [_torch_net(layers) for layers in model.members]
 
-    def predict_proba(rssi):
+    def forward(rssi):
         with torch.no_grad():
-            x = torch.from_numpy(model.scaler.transform(rssi))
+            x = torch.from_numpy(model.scaler.transform(rssi[None, :]))
             return (sum(torch.softmax(net(x), dim=1) for net in nets)
-                    / len(nets)).numpy()
-    return predict_proba
+                    / len(nets)).numpy()[0]
+    return forward
 
 
-def main():
-    """Run the torch variant until SIGINT."""
-    rclpy.init()
+def torch_node():
+    """Return a classifier node whose inference runs in torch."""
     node = ClassifierNode()
-    model = node.recognizer.model
-    model.predict_proba = torch_predict_proba(model)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    node.recognizer.forward = torch_forward(node.recognizer.model)
+    return node
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(main(make_node=torch_node))

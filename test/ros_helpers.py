@@ -1,16 +1,18 @@
 """Test-side ROS helpers: a node in its own process, and a scan client."""
 
+import contextlib
 import os
 import signal
 import subprocess
 
-from conftest import wait_until
+from conftest import python_module, wait_until
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from wifi_place_recognition.artifact import load_model
 
 RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -113,3 +115,22 @@ class Client:
             self.node.destroy_subscription(entity)
         self.node.destroy_publisher(self.pub)
         self.node.destroy_client(self.params)
+
+
+@contextlib.contextmanager
+def running_node(ros, tmp_path, model_path, name, *ros_args):
+    """
+    Run a classifier_node on ``model_path``; yield (client, proc, model).
+
+    On exit the node must stop cleanly (exit 0, no traceback).
+    """
+    proc = NodeProcess(tmp_path, python_module(
+        'classifier_node', '--ros-args', '-p', f'model_path:={model_path}',
+        *ros_args), name)
+    client = Client(ros, name)
+    model = load_model(model_path)
+    client.wait_ready(proc, (model.ap_ids[:6], [-60.0] * 6))
+    yield client, proc, model
+    client.close()
+    code, log = proc.stop()
+    assert code == 0 and 'Traceback' not in log, log

@@ -53,9 +53,12 @@ def test_colcon_installed_executable_answers(ros, tmp_path):
 
 def test_pip_installed_console_script_answers(ros, tmp_path):
     prefix = tmp_path / 'prefix'
+    source = tmp_path / 'source'  # pip builds in the tree: use a copy
+    shutil.copytree(REPO, source, ignore=shutil.ignore_patterns(
+        '.venv', '.git', 'build', 'install', 'log', '*.egg-info'))
     result = run([sys.executable, '-m', 'pip', 'install', '--no-deps',
                   '--no-build-isolation', '--prefix', str(prefix),
-                  str(REPO)])
+                  str(source)])
     assert result.returncode == 0, result.stdout + result.stderr
     site = Path(sysconfig.get_path(
         'purelib', vars={'base': str(prefix), 'platbase': str(prefix)}))

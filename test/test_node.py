@@ -7,9 +7,8 @@ from conftest import dataset_file, python_module, REPO, run, wait_until
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
-from ros_helpers import Client, NodeProcess
+from ros_helpers import Client, NodeProcess, running_node
 from wifi_place_recognition.fuzz import hostile_model_files
-from wifi_place_recognition.artifact import load_model
 from wifi_place_recognition.fingerprints import read_fingerprints
 from wifi_place_recognition.replay_scans import status_values
 
@@ -17,18 +16,10 @@ from wifi_place_recognition.replay_scans import status_values
 @pytest.fixture
 def running(ros, synthetic, tmp_path, request):
     """Start a node on the synthetic model; yield (client, proc, model)."""
-    _, model_path = synthetic
     name = f'classifier_{request.node.name[5:25]}'.replace('[', '_')
-    proc = NodeProcess(tmp_path, python_module(
-        'classifier_node', '--ros-args', '-p', f'model_path:={model_path}',
-        '-p', 'max_aps:=50'), name)
-    client = Client(ros, name)
-    model = load_model(model_path)
-    client.wait_ready(proc, (model.ap_ids[:6], [-60.0] * 6))
-    yield client, proc, model
-    client.close()
-    code, log = proc.stop()
-    assert code == 0 and 'Traceback' not in log, log
+    with running_node(ros, tmp_path, synthetic[1], name, '-p',
+                      'max_aps:=50') as started:
+        yield started
 
 
 def test_answers_match_the_model_and_carry_the_contract(running, synthetic):

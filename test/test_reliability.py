@@ -8,7 +8,7 @@ import time
 from conftest import FAST, python_module, synthetic_csv, wait_until
 import numpy as np
 import pytest
-from ros_helpers import Client, NodeProcess
+from ros_helpers import running_node
 from wifi_place_recognition.artifact import load_model
 from wifi_place_recognition.fuzz import fuzz_scans
 from wifi_place_recognition.replay_scans import status_values
@@ -53,17 +53,8 @@ def test_sigkill_of_train_model_keeps_the_previous_artifact(tmp_path):
 @pytest.fixture
 def fuzz_node(ros, synthetic, tmp_path):
     """Start a node on the synthetic model with the default max_aps."""
-    _, model_path = synthetic
-    proc = NodeProcess(tmp_path, python_module(
-        'classifier_node', '--ros-args', '-p', f'model_path:={model_path}'),
-        'fuzzed_node')
-    client = Client(ros, proc.name)
-    model = load_model(model_path)
-    client.wait_ready(proc, (model.ap_ids[:6], [-60.0] * 6))
-    yield client, proc, model
-    client.close()
-    code, log = proc.stop()
-    assert code == 0 and 'Traceback' not in log, log
+    with running_node(ros, tmp_path, synthetic[1], 'fuzzed_node') as started:
+        yield started
 
 
 def _settled_counts(client):

@@ -230,11 +230,11 @@ class ClassifierNode(Node):
         self.diag_pub.publish(out)
 
 
-def main(args=None):
+def main(args=None, make_node=ClassifierNode):
     """Run the node until SIGINT/SIGTERM; exit 1 on a bad model file."""
     rclpy.init(args=args)
     try:
-        node = ClassifierNode()
+        node = make_node()
     except ModelFileError as exc:
         rclpy.logging.get_logger('classifier_node').error(
             f'cannot load model: {exc}')
