@@ -56,9 +56,10 @@ def test_pip_installed_console_script_answers(ros, tmp_path):
     source = tmp_path / 'source'  # pip builds in the tree: use a copy
     shutil.copytree(REPO, source, ignore=shutil.ignore_patterns(
         '.venv', '.git', 'build', 'install', 'log', '*.egg-info'))
+    # --ignore-installed: without it pip removes this venv's own install.
     result = run([sys.executable, '-m', 'pip', 'install', '--no-deps',
-                  '--no-build-isolation', '--prefix', str(prefix),
-                  str(source)])
+                  '--ignore-installed', '--no-build-isolation', '--prefix',
+                  str(prefix), str(source)])
     assert result.returncode == 0, result.stdout + result.stderr
     site = Path(sysconfig.get_path(
         'purelib', vars={'base': str(prefix), 'platbase': str(prefix)}))
