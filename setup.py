@@ -34,6 +34,10 @@ setup(
             'evaluate_model = wifi_place_recognition.evaluate_model:main',
             'classifier_node = wifi_place_recognition.classifier_node:main',
             'replay_scans = wifi_place_recognition.replay_scans:main',
+            'wifi_scanner_node = '
+            'wifi_place_recognition.wifi_scanner_node:main',
+            'record_fingerprints = '
+            'wifi_place_recognition.record_fingerprints:main',
         ],
     },
 )

@@ -41,7 +41,6 @@ AUG_EXP = dict(PAPER, **AUG, representation='exponential')
 SUITES = {
     'default': {
         'default (augment + exponential + refit)': {},
-        'paper configuration': PAPER,
     },
     'table1': {
         'missing 100, per-AP scaling': dict(PAPER, not_detected=100.0,

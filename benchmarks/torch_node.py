@@ -9,7 +9,9 @@ imports torch.
 import sys
 
 import torch
-from wifi_place_recognition.classifier_node import ClassifierNode, main
+from wifi_place_recognition.artifact import ModelFileError
+from wifi_place_recognition.classifier_node import ClassifierNode
+from wifi_place_recognition.node_runner import run
 from wifi_place_recognition.training import TORCH_ACTIVATIONS
 
 
@@ -45,4 +47,4 @@ def torch_node():
 
 
 if __name__ == '__main__':
-    sys.exit(main(make_node=torch_node))
+    sys.exit(run(torch_node, startup_errors=(ModelFileError,)))

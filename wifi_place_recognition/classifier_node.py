@@ -18,14 +18,13 @@ from collections import Counter
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
                                 ParameterDescriptor, SetParametersResult)
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
 from .artifact import load_model, ModelFileError
+from .node_runner import run
 from .recognizer import OK, PlaceRecognizer
 from .resources import default_model_path
 from .scan import REJECT_REASONS, ScanRejected
@@ -230,24 +229,9 @@ class ClassifierNode(Node):
         self.diag_pub.publish(out)
 
 
-def main(args=None, make_node=ClassifierNode):
+def main(args=None):
     """Run the node until SIGINT/SIGTERM; exit 1 on a bad model file."""
-    rclpy.init(args=args)
-    try:
-        node = make_node()
-    except ModelFileError as exc:
-        rclpy.logging.get_logger('classifier_node').error(
-            f'cannot load model: {exc}')
-        rclpy.try_shutdown()
-        return 1
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run(ClassifierNode, args, (ModelFileError,))
 
 
 if __name__ == '__main__':

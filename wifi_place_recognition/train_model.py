@@ -73,7 +73,7 @@ def main(argv=None):
           f'(best epoch {report.best_epoch}; {report.dropped_empty} scans '
           f'without any AP left out)')
     if report.validation:
-        print(f'held-out ({config.validation}'
+        print(f'held-out ({report.validation_mode}'
               + (f' {report.validation_phones}'
                  if report.validation_phones else '')
               + f', {report.validation_samples} scans): building+floor '

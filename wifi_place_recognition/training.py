@@ -93,6 +93,7 @@ class TrainReport:
 
     best_epoch: list = field(default_factory=list)  # one per member
     validation: dict = field(default_factory=dict)
+    validation_mode: str = ''    # phone, random or none, as applied
     validation_phones: list = field(default_factory=list)
     train_samples: int = 0
     validation_samples: int = 0
@@ -300,7 +301,10 @@ def train(fp, config, log=print):
     held = split_validation(fp, config)
     report.train_samples = int((~held).sum())
     report.validation_samples = int(held.sum())
-    if 'PHONEID' in fp.meta and config.validation == 'phone':
+    report.validation_mode = config.validation
+    if config.validation == 'phone' and 'PHONEID' not in fp.meta:
+        report.validation_mode = 'random'
+    if report.validation_mode == 'phone':
         report.validation_phones = sorted(
             int(p) for p in np.unique(fp.meta['PHONEID'][held]))
 
@@ -313,7 +317,7 @@ def train(fp, config, log=print):
                fp.building[held], fp.floor[held])
         log(f'training on {report.train_samples} scans, selecting on '
             f'{report.validation_samples} held-out scans '
-            f'({config.validation})')
+            f'({report.validation_mode})')
     nets, epochs = [], []
     for k in range(config.ensemble):
         member = replace(config, seed=config.seed + k)
@@ -342,7 +346,7 @@ def train(fp, config, log=print):
         'training_data': {'source': fp.source, 'sha256': fp.sha256,
                           'scans': len(fp), 'dropped_empty':
                           report.dropped_empty, 'clipped_cells': fp.clipped},
-        'selection': {'held_out': config.validation,
+        'selection': {'held_out': report.validation_mode,
                       'held_out_phones': report.validation_phones,
                       'held_out_scans': report.validation_samples,
                       'best_epoch': report.best_epoch,

@@ -1,0 +1,270 @@
+"""Your own building: scan sources, recording, and the whole loop over ROS."""
+
+import os
+from pathlib import Path
+import signal
+
+from conftest import FAST, python_module, run, wait_until
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+import numpy as np
+import pytest
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from ros_helpers import Client, NodeProcess
+from sensor_msgs.msg import JointState
+from wifi_place_recognition.fingerprints import read_fingerprints
+from wifi_place_recognition.recording import FingerprintLog, RecordingError
+from wifi_place_recognition.replay_scans import status_values
+from wifi_place_recognition.wifi_sources import (
+    nm_percent_to_dbm, parse_iw, parse_nmcli, read_source, scan,
+    SourceError, wireless_interfaces)
+
+FIXTURES = Path(__file__).parent / 'fixtures'
+RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def fixture(name):
+    return (FIXTURES / name).read_text()
+
+
+# parsers on captured outputs -------------------------------------------------
+
+def test_iw_scan_output():
+    assert parse_iw(fixture('iw_scan.txt')) == [
+        ('00:11:22:33:44:55', -45.0), ('aa:bb:cc:dd:ee:01', -71.5),
+        ('aa:bb:cc:dd:ee:02', -88.0)]
+
+
+def test_iw_truncated_and_garbled_output_keeps_the_complete_entries():
+    assert parse_iw(fixture('iw_scan_truncated.txt')) == [
+        ('00:11:22:33:44:55', -45.0)]
+    assert parse_iw(fixture('iw_scan_garbled.txt')) == [
+        ('00:11:22:33:44:88', -60.0)]
+    assert parse_iw('') == []
+
+
+def test_nmcli_terse_output_and_the_percent_conversion():
+    assert parse_nmcli(fixture('nmcli.txt')) == [
+        ('00:11:22:33:44:55', -20.0), ('aa:bb:cc:dd:ee:01', -71.0),
+        ('aa:bb:cc:dd:ee:02', -90.0)]
+    assert parse_nmcli(fixture('nmcli_garbled.txt')) == [
+        ('00:11:22:33:44:55', -20.0), ('aa:bb:cc:dd:ee:04', -50.0)]
+    assert nm_percent_to_dbm(10) == -90.0      # below NM's floor
+
+
+@pytest.fixture
+def fake_tools(tmp_path, monkeypatch):
+    """Put fake ``iw`` and ``nmcli`` on PATH; return their folder."""
+    folder = tmp_path / 'bin'
+    folder.mkdir()
+
+    def install(name, script):
+        path = folder / name
+        path.write_text('#!/bin/sh\n' + script)
+        path.chmod(0o755)
+    install.folder = folder
+    monkeypatch.setenv('PATH', f'{folder}{os.pathsep}/usr/bin:/bin')
+    return install
+
+
+def test_sources_fall_back_in_order_and_say_why(fake_tools):
+    fake_tools('iw', 'if [ "$4" = dump ]; then cat "{}"; exit 0; fi\n'
+               'echo "command failed: Operation not permitted (-1)" >&2\n'
+               'exit 255\n'.format(FIXTURES / 'iw_scan.txt'))
+    source, readings = scan(['iw', 'iw_dump', 'nmcli'], 'wlan0')
+    assert source == 'iw_dump' and len(readings) == 3
+    with pytest.raises(SourceError) as err:
+        scan(['iw', 'nmcli'], 'wlan0')
+    assert 'Operation not permitted' in str(err.value)
+    assert 'nmcli is not installed' in str(err.value)
+    fake_tools('nmcli', 'echo "some unrelated text"\n')
+    with pytest.raises(SourceError, match='no readable AP'):
+        read_source('nmcli', 'wlan0')
+
+
+def test_wireless_interfaces(tmp_path):
+    (tmp_path / 'eth0').mkdir()
+    (tmp_path / 'wlp2s0' / 'wireless').mkdir(parents=True)
+    assert wireless_interfaces(tmp_path) == ['wlp2s0']
+    assert wireless_interfaces(tmp_path / 'none') == []
+
+
+# the recorder file -------------------------------------------------------------
+
+def test_recording_widens_the_header_and_trains(tmp_path):
+    path = tmp_path / 'rec.csv'
+    log = FingerprintLog(path)
+    assert log.add(['AA-BB-CC-00-00-01', 'x'], [-50.0, float('nan')], 0, 0,
+                   1.0) == (True, 1)
+    log.add(['aa:bb:cc:00:00:01', 'AA:BB:CC:00:00:02'], [-55.0, 3.0], 0, 1,
+            2.0)
+    log.add(['AA:BB:CC:00:00:02', 'AA:BB:CC:00:00:02'], [-80.0, -60.0], 0, 1,
+            3.0)
+    assert log.add(['a'], [float('inf')], 0, 1, 4.0) == (False, 1)
+    fp = read_fingerprints(path)
+    assert fp.ap_ids == ('aa:bb:cc:00:00:01', 'aa:bb:cc:00:00:02')
+    np.testing.assert_array_equal(fp.rssi, [[-50, np.nan], [-55, 0],
+                                            [np.nan, -60]])
+    assert fp.floor.tolist() == [0, 1, 1]
+    assert fp.meta['TIMESTAMP'].tolist() == [1.0, 2.0, 3.0]
+
+
+def test_recording_continues_after_a_torn_line(tmp_path):
+    path = tmp_path / 'rec.csv'
+    FingerprintLog(path).add(['aa:bb:cc:00:00:01'], [-50.0], 1, 2, 1.0)
+    with open(path, 'a') as f:
+        f.write('1,2,2.000,-6')          # killed mid-append
+    log = FingerprintLog(path)
+    assert log.counts == {(1, 2): 1}
+    log.add(['aa:bb:cc:00:00:01'], [-40.0], 1, 2, 3.0)
+    assert read_fingerprints(path).rssi[:, 0].tolist() == [-50.0, -40.0]
+    (tmp_path / 'other.csv').write_text('WAP001,FLOOR\n-50,1\n')
+    with pytest.raises(RecordingError, match='not a recording'):
+        FingerprintLog(tmp_path / 'other.csv')
+
+
+# nodes over ROS ----------------------------------------------------------------
+
+def test_scanner_node_publishes_from_iw_and_reports_errors(
+        ros, fake_tools, tmp_path):
+    fake_tools('iw', f'cat "{FIXTURES / "iw_scan.txt"}"\n')
+    scans, diags = [], []
+    subs = [ros.create_subscription(JointState, 'wifi/scan', scans.append,
+                                    qos_profile_sensor_data),
+            ros.create_subscription(DiagnosticArray, '/diagnostics',
+                                    diags.append, RELIABLE)]
+    env = dict(os.environ)
+    good = NodeProcess(tmp_path, python_module(
+        'wifi_scanner_node', '--ros-args', '-p', 'interface:=wlan7', '-p',
+        'period:=0.2'), 'scanner_ok', env=env)
+    try:
+        assert wait_until(lambda: scans, 20, ros), good.stop()[1]
+    finally:
+        code, log = good.stop()
+    assert code == 0 and 'Traceback' not in log, log
+    assert scans[0].header.frame_id == 'wlan7'
+    assert list(scans[0].name) == ['00:11:22:33:44:55', 'aa:bb:cc:dd:ee:01',
+                                   'aa:bb:cc:dd:ee:02']
+    assert list(scans[0].position) == [-45.0, -71.5, -88.0]
+
+    (fake_tools.folder / 'iw').unlink()          # the tool disappears
+    bad = NodeProcess(tmp_path, python_module(
+        'wifi_scanner_node', '--ros-args', '-p', 'interface:=wlan7', '-p',
+        'period:=0.2', '-p', 'sources:=[iw, nmcli]'), 'scanner_bad', env=env)
+
+    def errors():
+        return [s for d in diags for s in d.status
+                if s.name == 'scanner_bad: scanner' and
+                s.level == DiagnosticStatus.ERROR]
+    try:
+        assert wait_until(lambda: len(errors()) >= 3, 20, ros)
+    finally:
+        code, log = bad.stop()
+    assert code == 0 and 'Traceback' not in log, log
+    assert 'iw is not installed' in errors()[0].message
+    for sub in subs:
+        ros.destroy_subscription(sub)
+
+
+class FloorSimulator:
+    """Scans drawn from per-floor AP distributions (a simulated building)."""
+
+    def __init__(self, seed=0, n_aps=40, floors=((0, 0), (0, 1), (1, 0))):
+        rng = np.random.default_rng(seed)
+        self.rng = rng
+        self.floors = floors
+        self.macs = [f'02:00:00:00:{i // 256:02x}:{i % 256:02x}'
+                     for i in range(n_aps)]
+        self.mean = rng.uniform(-95, -45, (len(floors), n_aps))
+        self.seen = rng.random((len(floors), n_aps)) < 0.45
+
+    def scan(self, floor_index):
+        """Return (names, rssi) of one scan on floor ``floor_index``."""
+        seen = self.seen[floor_index] & (self.rng.random(len(self.macs)) >
+                                         0.15)
+        rssi = self.mean[floor_index] + self.rng.normal(0, 4, len(self.macs))
+        return ([m for m, s in zip(self.macs, seen) if s],
+                [float(v) for v, s in zip(np.clip(rssi, -100, -30), seen)
+                 if s])
+
+
+def test_the_whole_loop_in_a_simulated_building(ros, tmp_path):
+    sim = FloorSimulator()
+    csv_path = tmp_path / 'building.csv'
+    recorder = NodeProcess(tmp_path, python_module(
+        'record_fingerprints', '--ros-args', '-p', f'output:={csv_path}'),
+        'record_fingerprints')
+    client = Client(ros, 'record_fingerprints')
+    try:
+        assert wait_until(lambda: client.pub.get_subscription_count() and
+                          client.params.service_is_ready(), 20, ros)
+        for k, (building, floor) in enumerate(sim.floors):
+            assert client.set_param('building', building).successful
+            assert client.set_param('floor', floor).successful
+            for _ in range(60):          # the robot drives around the floor
+                client.pub.publish(client.scan(*sim.scan(k)))
+                wait_until(lambda: False, 0.01, ros)
+        wait_until(lambda: False, 1.0, ros)
+    finally:
+        client.close()
+        code, log = recorder.stop()
+    assert code == 0 and 'Traceback' not in log, log
+    recorded = read_fingerprints(csv_path)
+    per_floor = {f: int(((recorded.building == b) & (recorded.floor == f_))
+                        .sum()) for f, (b, f_) in enumerate(sim.floors)}
+    assert all(n >= 40 for n in per_floor.values()), per_floor
+
+    model = tmp_path / 'building.npz'
+    # A few hundred scans: many more epochs than the UJIIndoorLoc default.
+    trained = run(python_module('train_model', '--data', csv_path, '-o',
+                                model, *FAST, '--epochs', '150',
+                                '--patience', '50'))
+    assert trained.returncode == 0, trained.stderr
+
+    node = NodeProcess(tmp_path, python_module(
+        'classifier_node', '--ros-args', '-p', f'model_path:={model}'),
+        'classifier_node')
+    client = Client(ros, 'classifier_node')
+    try:
+        client.wait_ready(node, sim.scan(0))
+        right = 0
+        for k, (building, floor) in enumerate(sim.floors):
+            for _ in range(20):
+                values = status_values(client.send(*sim.scan(k)))
+                right += (int(values['building']), int(values['floor'])) == \
+                    (building, floor)
+    finally:
+        client.close()
+        code, log = node.stop()
+    assert code == 0, log
+    assert right >= 0.9 * 20 * len(sim.floors), trained.stdout
+
+
+def test_killed_recorder_continues_the_same_file(ros, tmp_path):
+    csv_path = tmp_path / 'rec.csv'
+    sim = FloorSimulator(seed=1)
+    progress = []
+    sub = ros.create_subscription(
+        DiagnosticArray, '/diagnostics',
+        lambda m: progress.extend(s for s in m.status
+                                  if s.name.endswith(': progress')),
+        RELIABLE)
+    totals = []
+    for attempt in range(2):
+        progress.clear()
+        recorder = NodeProcess(tmp_path, python_module(
+            'record_fingerprints', '--ros-args', '-p', f'output:={csv_path}',
+            '-p', 'building:=0', '-p', 'floor:=1'), 'record_fingerprints')
+        client = Client(ros, 'record_fingerprints')
+        # The killed process's reader lingers in discovery: wait for the
+        # new process's own progress report before sending scans.
+        assert wait_until(lambda: progress, 20, ros), recorder.stop()[1]
+        for _ in range(30):
+            client.pub.publish(client.scan(*sim.scan(1)))
+            wait_until(lambda: False, 0.02, ros)
+        wait_until(lambda: False, 0.5, ros)
+        recorder.proc.send_signal(signal.SIGKILL)
+        recorder.proc.wait()
+        client.close()
+        totals.append(len(read_fingerprints(csv_path)))
+    ros.destroy_subscription(sub)
+    assert 25 <= totals[0] and totals[1] - totals[0] >= 25, totals
