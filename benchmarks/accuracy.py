@@ -68,6 +68,11 @@ SUITES = {
         'augment, no SAE': dict(PAPER, **AUG, sae_epochs=0),
         'augment, dropout .5': dict(PAPER, **AUG, dropout=0.5),
     },
+    'search3': {
+        'augment + exponential, EMA 4 epochs': dict(AUG_EXP, ema_epochs=4),
+        'augment + exponential, EMA 4 epochs, lr 3e-4': dict(
+            AUG_EXP, ema_epochs=4, learning_rate=3e-4),
+    },
     'search2': {
         'augment + exponential, ensemble 3': dict(AUG_EXP, ensemble=3),
         'augment + exponential, ensemble 3, refit': dict(AUG_EXP, ensemble=3,

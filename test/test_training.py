@@ -37,7 +37,7 @@ def test_same_seed_same_model(tmp_path):
 def test_learns_the_synthetic_building_and_numpy_matches_torch(tmp_path):
     fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv'))
     test = read_fingerprints(synthetic_csv(tmp_path / 'b.csv', seed=0))
-    config = TrainConfig(ensemble=2, refit=True, **SMALL)
+    config = TrainConfig(ensemble=2, refit=True, ema_epochs=1, **SMALL)
     model, nets, report = train(fp, config, log=lambda s: None)
     _, _, _, proba = model.predict(test.rssi)
     assert len(model.members) == len(nets) == 2

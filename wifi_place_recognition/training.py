@@ -9,6 +9,7 @@ Adam. The epoch with the best building+floor accuracy on a held-out split of
 the training file is kept.
 """
 
+import copy
 import time
 from dataclasses import asdict, dataclass, field, replace
 
@@ -52,6 +53,7 @@ class TrainConfig:
     patience: int = 10
     batch_size: int = 64
     learning_rate: float = 1e-3
+    ema_epochs: float = 0.0       # weight-averaging horizon; 0: off
     validation: str = 'phone'
     validation_fraction: float = 0.2
     refit: bool = True
@@ -72,6 +74,7 @@ class TrainConfig:
             (self.sae_epochs >= 0 and self.epochs >= 1 and
              self.patience >= 1, 'epochs must be positive'),
             (self.ensemble >= 1, 'ensemble must be at least 1'),
+            (self.ema_epochs >= 0, 'ema_epochs must be >= 0'),
             (self.batch_size >= 1 and self.learning_rate > 0,
              'batch size and learning rate must be positive'),
             (self.validation in VALIDATIONS,
@@ -249,6 +252,12 @@ def _fit(rssi, y, scaler, config, epochs, val, classes, log):
     net = PlaceNet(rssi.shape[1], len(classes), config)
     _pretrain_sae(net, batches, config, log)
     optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
+    # With ema_epochs the kept weights are an exponential moving average of
+    # the trained ones over about that many epochs (Polyak averaging):
+    # smoother, and what is selected and exported.
+    steps = len(batches) / config.batch_size * config.ema_epochs
+    keep = 1.0 / max(1.0, steps)
+    kept = copy.deepcopy(net) if config.ema_epochs else net
     best = (-1.0, 0, None, {})
     for epoch in range(1, epochs + 1):
         total = 0.0
@@ -258,24 +267,28 @@ def _fit(rssi, y, scaler, config, epochs, val, classes, log):
             loss.backward()
             optimiser.step()
             total += loss.item() * len(idx)
+            if kept is not net:
+                with torch.no_grad():
+                    for k, p in zip(kept.parameters(), net.parameters()):
+                        k.lerp_(p, keep)
         line = f'epoch {epoch:3d}/{epochs}  loss {total / len(rssi):.4f}'
         if val is not None:
             xv, bv, fv = val
-            scores = accuracies(bv, fv, *_predict_labels([net], xv, classes))
+            scores = accuracies(bv, fv, *_predict_labels([kept], xv, classes))
             line += (f'  held-out building+floor '
                      f'{scores["building_floor_accuracy"]:.4f}')
             if scores['building_floor_accuracy'] > best[0]:
                 best = (scores['building_floor_accuracy'], epoch,
-                        {k: v.clone() for k, v in net.state_dict().items()},
+                        {k: v.clone() for k, v in kept.state_dict().items()},
                         scores)
             elif epoch - best[1] >= config.patience:
                 log(line + '  (early stop)')
                 break
         log(line)
     if val is not None:
-        net.load_state_dict(best[2])
-    net.eval()
-    return net, best[1] or epochs, best[3]
+        kept.load_state_dict(best[2])
+    kept.eval()
+    return kept, best[1] or epochs, best[3]
 
 
 def train(fp, config, log=print):
