@@ -25,11 +25,11 @@ from sensor_msgs.msg import JointState
 
 from .artifact import load_model, ModelFileError
 from .node_runner import run
-from .recognizer import OK, PlaceRecognizer
+from .recognizer import OK, PlaceRecognizer, WARN
 from .resources import default_model_path
 from .scan import REJECT_REASONS, ScanRejected
 
-LEVELS = {OK: DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN}
+LEVELS = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN}
 THROTTLE_S = 5.0
 MAX_DRAIN = 100_000
 
@@ -95,6 +95,8 @@ class ClassifierNode(Node):
         self.add_post_set_parameters_callback(self._apply_parameters)
 
         self.status_name = f'{self.get_name()}: place'
+        self.counts = Counter(received=0, answered=0, rejected=0, dropped=0)
+        self.last_latency_ms = math.nan
         self.place_pub = self.create_publisher(
             DiagnosticArray, '~/place',
             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
@@ -104,9 +106,6 @@ class ClassifierNode(Node):
             JointState, 'wifi/scan', self._on_scan, qos_profile_sensor_data,
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.create_timer(1.0, self._publish_health)
-
-        self.counts = Counter(received=0, answered=0, rejected=0, dropped=0)
-        self.last_latency_ms = math.nan
         provenance = self.recognizer.model.provenance
         self.get_logger().info(
             f'model {model_path}: {len(self.recognizer.model.ap_ids)} APs, '

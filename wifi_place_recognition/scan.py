@@ -81,8 +81,10 @@ class ScanMapper:
         except RssiError as exc:
             kind = 'non_finite' if np.isinf(values[exc.index]) else \
                 'implausible_rssi'
-            raise ScanRejected(kind, f'{names[exc.index[0]]!r}: {exc}') \
-                from None
+            name = repr(names[exc.index[0]])
+            if len(name) > 40:
+                name = name[:37] + '...'
+            raise ScanRejected(kind, f'{name}: {exc}') from None
         cols = self.columns(names)
         known = cols >= 0
         n_known = int(np.unique(cols[known]).size)
