@@ -94,6 +94,9 @@ class ScanForward:
                        layers[0].bias + layers[0].weight @ self.blank,
                        ACTIVATIONS[layers[0].activation])
                       for layers in model.members]
+        self.rest = [[(np.ascontiguousarray(layer.weight.T), layer.bias,
+                       ACTIVATIONS[layer.activation]) for layer in layers[1:]]
+                     for layers in model.members]
 
     def __call__(self, rssi):
         """Return class probabilities (k,) for one (n_aps,) RSSI vector."""
@@ -101,12 +104,10 @@ class ScanForward:
         delta = self.model.scaler.transform(rssi[columns], columns) - \
             self.blank[columns]
         total = 0.0
-        for (weight_t, bias, activation), layers in zip(self.first,
-                                                        self.model.members):
+        for (weight_t, bias, activation), rest in zip(self.first, self.rest):
             x = activation(bias + delta @ weight_t[columns])
-            for layer in layers[1:]:
-                x = ACTIVATIONS[layer.activation](
-                    x @ layer.weight.T + layer.bias)
+            for weight_t, bias, activation in rest:
+                x = activation(x @ weight_t + bias)
             x = np.exp(x - x.max())
             total = total + x / x.sum()
         return total / len(self.model.members)

@@ -42,7 +42,7 @@ class RssiScaler:
             return np.where(np.isnan(rssi), np.float32(self.not_detected),
                             rssi)
         floor = np.float32(self.not_detected)
-        above = np.clip(np.nan_to_num(rssi - floor, nan=0.0), 0.0, None)
+        above = np.fmax(rssi - floor, np.float32(0.0))  # NaN and below: 0
         if self.representation == 'powed':
             out = (above / -floor) ** np.float32(np.e)
         else:

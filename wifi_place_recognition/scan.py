@@ -47,16 +47,26 @@ class MappedScan:
 class ScanMapper:
     """Map scans onto the AP order of ``ap_ids``."""
 
-    def __init__(self, ap_ids, max_aps=4096):
+    def __init__(self, ap_ids, max_aps=4096, cache_size=65536):
         self.index = {normalize_ap_id(a): j for j, a in enumerate(ap_ids)}
         self.size = len(ap_ids)
         self.max_aps = max_aps
+        self._cache = {}    # name as received -> column (names repeat)
+        self._cache_size = cache_size
+
+    def _column(self, name):
+        column = self._cache.get(name)
+        if column is None:
+            column = self.index.get(normalize_ap_id(name), -1)
+            if len(self._cache) >= self._cache_size:
+                self._cache.clear()
+            self._cache[name] = column
+        return column
 
     def columns(self, names):
         """Return each name's column in the model, or -1 if unknown."""
-        get = self.index.get
-        return np.fromiter((get(normalize_ap_id(n), -1) for n in names),
-                           dtype=np.int64, count=len(names))
+        return np.fromiter(map(self._column, names), dtype=np.int64,
+                           count=len(names))
 
     def map(self, names, rssi):
         """
@@ -87,7 +97,7 @@ class ScanMapper:
             raise ScanRejected(kind, f'{name}: {exc}') from None
         cols = self.columns(names)
         known = cols >= 0
-        n_known = int(np.unique(cols[known]).size)
+        n_known = len(set(cols[known].tolist()))
         if not n_known:
             raise ScanRejected('no_known_ap', f'none of the {len(names)} APs '
                                f'is known to the model')
