@@ -255,9 +255,18 @@ def test_killed_recorder_continues_the_same_file(ros, tmp_path):
             'record_fingerprints', '--ros-args', '-p', f'output:={csv_path}',
             '-p', 'building:=0', '-p', 'floor:=1'), 'record_fingerprints')
         client = Client(ros, 'record_fingerprints')
-        # The killed process's reader lingers in discovery: wait for the
-        # new process's own progress report before sending scans.
-        assert wait_until(lambda: progress, 20, ros), recorder.stop()[1]
+        before = totals[-1] if totals else 0
+
+        def recorded():
+            values = status_values(progress[-1]) if progress else {}
+            return int(values.get('scans/B0F1', 0))
+        # The killed process's reader lingers in discovery, and the new
+        # reader may not accept our first scans: probe until one is recorded.
+        for _ in range(100):
+            client.pub.publish(client.scan(*sim.scan(1)))
+            if wait_until(lambda: recorded() > before, 0.3, ros):
+                break
+        assert recorded() > before, recorder.stop()[1]
         for _ in range(30):
             client.pub.publish(client.scan(*sim.scan(1)))
             wait_until(lambda: False, 0.02, ros)
@@ -268,3 +277,4 @@ def test_killed_recorder_continues_the_same_file(ros, tmp_path):
         totals.append(len(read_fingerprints(csv_path)))
     ros.destroy_subscription(sub)
     assert 25 <= totals[0] and totals[1] - totals[0] >= 25, totals
+    assert FingerprintLog(csv_path).counts[(0, 1)] == totals[1]
