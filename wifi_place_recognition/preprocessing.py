@@ -71,10 +71,6 @@ class RssiScaler:
             return (self.fill(rssi) - self.mean_) / self.std_
         return (self.fill(rssi) - self.mean_[columns]) / self.std_[columns]
 
-    def fit_transform(self, rssi):
-        """Fit, then transform the same scans."""
-        return self.fit(rssi).transform(rssi)
-
     def params(self):
         """Return the JSON-able parameters (arrays go separately)."""
         return {'not_detected': self.not_detected, 'scaling': self.scaling,
