@@ -104,8 +104,9 @@ class ScanForward:
         delta = self.model.scaler.transform(rssi[columns], columns) - \
             self.blank[columns]
         total = 0.0
-        for (weight_t, bias, activation), rest in zip(self.first, self.rest):
-            x = activation(bias + delta @ weight_t[columns])
+        for (first_t, first_bias, first_act), rest in zip(self.first,
+                                                          self.rest):
+            x = first_act(first_bias + delta @ first_t[columns])
             for weight_t, bias, activation in rest:
                 x = activation(x @ weight_t + bias)
             x = np.exp(x - x.max())
