@@ -101,11 +101,12 @@ def replay(node, fp, args, log):
             next_time += period
             replayer.spin_until(lambda: False, next_time)
         else:  # lockstep: wait for this answer before the next scan
-            for _ in range(1 + args.retries):
+            for attempt in range(1 + args.retries):
+                if attempt:
+                    replayer.publish(row, msg)
                 if replayer.spin_until(lambda: row in replayer.answers,
                                        time.monotonic() + args.timeout):
                     break
-                replayer.publish(row, msg)
         if (row + 1) % args.progress == 0 or row + 1 == n:
             log(f'{row + 1}/{n} scans sent, {len(replayer.answers)} '
                 f'answered')
