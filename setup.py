@@ -30,14 +30,14 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'train_model = wifi_place_recognition.train_model:main',
-            'evaluate_model = wifi_place_recognition.evaluate_model:main',
-            'classifier_node = wifi_place_recognition.classifier_node:main',
-            'replay_scans = wifi_place_recognition.replay_scans:main',
+            'train_model = wifi_place_recognition.cli.train_model:main',
+            'evaluate_model = wifi_place_recognition.cli.evaluate_model:main',
+            'classifier_node = wifi_place_recognition.ros.classifier_node:main',
+            'replay_scans = wifi_place_recognition.cli.replay_scans:main',
             'wifi_scanner_node = '
-            'wifi_place_recognition.wifi_scanner_node:main',
+            'wifi_place_recognition.ros.wifi_scanner_node:main',
             'record_fingerprints = '
-            'wifi_place_recognition.record_fingerprints:main',
+            'wifi_place_recognition.ros.record_fingerprints:main',
         ],
     },
 )

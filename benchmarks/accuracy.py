@@ -26,10 +26,10 @@ from sklearn.ensemble import RandomForestClassifier
 from sklearn.neighbors import KNeighborsClassifier
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from wifi_place_recognition.atomic import atomic_write  # noqa: E402
-from wifi_place_recognition.fingerprints import read_fingerprints  # noqa
-from wifi_place_recognition.metrics import accuracies  # noqa: E402
-from wifi_place_recognition.training import (  # noqa: E402
+from wifi_place_recognition.core.atomic import atomic_write  # noqa: E402
+from wifi_place_recognition.data.fingerprints import read_fingerprints  # noqa
+from wifi_place_recognition.core.metrics import accuracies  # noqa: E402
+from wifi_place_recognition.training.trainer import (  # noqa: E402
     PAPER, split_validation, train, TrainConfig)
 
 PAPER_FIGURES = {'SAE default (paper: 0.92)': 0.92,

@@ -28,14 +28,14 @@ from sensor_msgs.msg import JointState
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-from wifi_place_recognition.atomic import atomic_write  # noqa: E402
-from wifi_place_recognition.fingerprints import read_fingerprints  # noqa
-from wifi_place_recognition.replay_scans import (  # noqa: E402
+from wifi_place_recognition.core.atomic import atomic_write  # noqa: E402
+from wifi_place_recognition.data.fingerprints import read_fingerprints  # noqa
+from wifi_place_recognition.ros.messages import (  # noqa: E402
     scan_message, status_values)
 
 VARIANTS = {
     'numpy (shipped node)': [sys.executable, '-m',
-                             'wifi_place_recognition.classifier_node'],
+                             'wifi_place_recognition.ros.classifier_node'],
     'torch (baseline)': [sys.executable, str(ROOT / 'benchmarks' /
                                              'torch_node.py')],
 }

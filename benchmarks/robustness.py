@@ -3,7 +3,7 @@ Robustness figures: fuzzed scans, a flood, hostile model files, torn writes.
 
     python benchmarks/robustness.py --data validationData-public.csv
 
-1. ``--fuzz`` malformed and random scans (wifi_place_recognition.fuzz) are
+1. ``--fuzz`` malformed and random scans (test/fuzz.py) are
    published to a running classifier_node; its health counts are read back.
 2. A flood of valid scans for ``--flood-seconds``: node RSS at start, peak
    and end, answered/dropped counts, the node's own processing time
@@ -31,17 +31,17 @@ from diagnostic_msgs.msg import DiagnosticArray
 from node import Bench, RELIABLE, rss_mib
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from wifi_place_recognition.artifact import load_model  # noqa: E402
-from wifi_place_recognition.atomic import atomic_write  # noqa: E402
-from wifi_place_recognition.fingerprints import read_fingerprints  # noqa
-from wifi_place_recognition.fuzz import (  # noqa: E402
+sys.path[:0] = [str(ROOT), str(ROOT / "test")]
+from wifi_place_recognition.core.artifact import load_model  # noqa: E402
+from wifi_place_recognition.core.atomic import atomic_write  # noqa: E402
+from wifi_place_recognition.data.fingerprints import read_fingerprints  # noqa
+from fuzz import (  # noqa: E402
     fuzz_scans, hostile_model_files)
-from wifi_place_recognition.replay_scans import status_values  # noqa: E402
-from wifi_place_recognition.resources import default_model_path  # noqa
+from wifi_place_recognition.ros.messages import status_values  # noqa: E402
+from wifi_place_recognition.core.resources import default_model_path  # noqa
 
-NODE = [sys.executable, '-m', 'wifi_place_recognition.classifier_node']
-EVALUATE = [sys.executable, '-m', 'wifi_place_recognition.evaluate_model']
+NODE = [sys.executable, '-m', 'wifi_place_recognition.ros.classifier_node']
+EVALUATE = [sys.executable, '-m', 'wifi_place_recognition.cli.evaluate_model']
 
 
 class Health:
@@ -162,7 +162,7 @@ def torn_writes(folder, kills, seed):
     path = folder / 'rewritten.npz'
     rng = np.random.default_rng(seed)
     survived = 0
-    code = ('import sys; from wifi_place_recognition.fuzz import '
+    code = ('import sys; from fuzz import '
             'rewrite_forever; rewrite_forever(sys.argv[1])')
     for _ in range(kills):
         proc = subprocess.Popen([sys.executable, '-c', code, str(path)],

@@ -9,10 +9,11 @@ imports torch.
 import sys
 
 import torch
-from wifi_place_recognition.artifact import ModelFileError
-from wifi_place_recognition.classifier_node import ClassifierNode
-from wifi_place_recognition.node_runner import run
-from wifi_place_recognition.training import TORCH_ACTIVATIONS
+from wifi_place_recognition.core.artifact import ModelFileError
+from wifi_place_recognition.core.model import mean_softmax
+from wifi_place_recognition.ros.classifier_node import ClassifierNode
+from wifi_place_recognition.ros.runner import run
+from wifi_place_recognition.training.trainer import TORCH_ACTIVATIONS
 
 
 def _torch_net(layers):
@@ -34,16 +35,13 @@ def torch_forward(model):
     def forward(rssi):
         with torch.no_grad():
             x = torch.from_numpy(model.scaler.transform(rssi[None, :]))
-            return (sum(torch.softmax(net(x), dim=1) for net in nets)
-                    / len(nets)).numpy()[0]
+            return mean_softmax([net(x).numpy() for net in nets])[0]
     return forward
 
 
 def torch_node():
     """Return a classifier node whose inference runs in torch."""
-    node = ClassifierNode()
-    node.recognizer.forward = torch_forward(node.recognizer.model)
-    return node
+    return ClassifierNode(make_forward=torch_forward)
 
 
 if __name__ == '__main__':

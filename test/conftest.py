@@ -13,7 +13,8 @@ import pytest
 os.environ['ROS_DOMAIN_ID'] = str(10 + os.getpid() % 90)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
-REPO = Path(__file__).resolve().parent.parent
+TEST_DIR = Path(__file__).resolve().parent
+REPO = TEST_DIR.parent
 DATASET = os.environ.get('WIFI_PR_DATASET')
 
 
@@ -59,7 +60,7 @@ FAST = ['--sae-layers', '32,16', '--classifier-layers', '16',
 @pytest.fixture(scope='session')
 def synthetic(tmp_path_factory):
     """Return (csv path, trained model path) for the synthetic building."""
-    from wifi_place_recognition.train_model import main
+    from wifi_place_recognition.cli.train_model import main
     folder = tmp_path_factory.mktemp('synthetic')
     csv_path = synthetic_csv(folder / 'fingerprints.csv')
     model_path = folder / 'model.npz'

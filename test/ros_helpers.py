@@ -12,7 +12,7 @@ from rcl_interfaces.srv import SetParameters
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from wifi_place_recognition.artifact import load_model
+from wifi_place_recognition.core.artifact import load_model
 
 RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -125,7 +125,7 @@ def running_node(ros, tmp_path, model_path, name, *ros_args):
     On exit the node must stop cleanly (exit 0, no traceback).
     """
     proc = NodeProcess(tmp_path, python_module(
-        'classifier_node', '--ros-args', '-p', f'model_path:={model_path}',
+        'ros.classifier_node', '--ros-args', '-p', f'model_path:={model_path}',
         *ros_args), name)
     client = Client(ros, name)
     model = load_model(model_path)

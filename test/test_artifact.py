@@ -4,10 +4,10 @@ import json
 
 import numpy as np
 import pytest
-from wifi_place_recognition.artifact import (
+from wifi_place_recognition.core.artifact import (
     load_model, ModelFileError, save_model)
-from wifi_place_recognition.fuzz import hostile_model_files
-from wifi_place_recognition.resources import default_model_path
+from fuzz import hostile_model_files
+from wifi_place_recognition.core.resources import default_model_path
 
 
 def test_round_trip_keeps_predictions(synthetic, tmp_path):

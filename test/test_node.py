@@ -8,9 +8,9 @@ from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
 from ros_helpers import Client, NodeProcess, running_node
-from wifi_place_recognition.fuzz import hostile_model_files
-from wifi_place_recognition.fingerprints import read_fingerprints
-from wifi_place_recognition.replay_scans import status_values
+from fuzz import hostile_model_files
+from wifi_place_recognition.data.fingerprints import read_fingerprints
+from wifi_place_recognition.ros.messages import status_values
 
 
 @pytest.fixture
@@ -122,7 +122,7 @@ def test_thresholds_change_at_runtime_and_bad_values_are_refused(running):
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
 def test_clean_shutdown(ros, synthetic, tmp_path, sig):
     proc = NodeProcess(tmp_path, python_module(
-        'classifier_node', '--ros-args', '-p',
+        'ros.classifier_node', '--ros-args', '-p',
         f'model_path:={synthetic[1]}'), f'shutdown_{sig.name}')
     client = Client(ros, proc.name)
     client.wait_ready(proc, (['AA:BB:CC:00:00:00'], [-60.0]))
@@ -137,7 +137,7 @@ def test_bad_and_hostile_model_files_are_one_clear_error(synthetic, tmp_path):
     files = hostile_model_files(synthetic[1], tmp_path, marker)
     files['missing'] = tmp_path / 'missing.npz'
     for kind, path in files.items():
-        result = run(python_module('classifier_node', '--ros-args', '-p',
+        result = run(python_module('ros.classifier_node', '--ros-args', '-p',
                                    f'model_path:={path}'), timeout=30)
         assert result.returncode == 1, kind
         assert 'cannot start' in result.stderr, kind
@@ -151,7 +151,7 @@ def test_params_file_is_read(ros, tmp_path):
     params.write_text((REPO / 'config' / 'classifier_node.yaml').read_text()
                       .replace('min_known_aps: 3', 'min_known_aps: 500'))
     proc = NodeProcess(tmp_path, python_module(
-        'classifier_node', '--ros-args', '--params-file', params),
+        'ros.classifier_node', '--ros-args', '--params-file', params),
         'classifier_node')
     client = Client(ros, proc.name)
     try:
@@ -165,17 +165,17 @@ def test_params_file_is_read(ros, tmp_path):
 
 def test_closed_loop_matches_evaluate_model(tmp_path):
     data = dataset_file('validationData-public.csv')
-    proc = NodeProcess(tmp_path, python_module('classifier_node'),
+    proc = NodeProcess(tmp_path, python_module('ros.classifier_node'),
                        'classifier_node')
     try:
-        replay = run(python_module('replay_scans', '--data', data,
+        replay = run(python_module('cli.replay_scans', '--data', data,
                                    '--predictions', tmp_path / 'ros.csv'),
                      timeout=300)
     finally:
         code, log = proc.stop()
     assert replay.returncode == 0, replay.stderr + log
     assert '556/556 scans answered' in replay.stdout
-    offline = run(python_module('evaluate_model', '--data', data,
+    offline = run(python_module('cli.evaluate_model', '--data', data,
                                 '--predictions', tmp_path / 'offline.csv'))
     assert offline.returncode == 0, offline.stderr
     ros_rows = list(csv.reader((tmp_path / 'ros.csv').open()))

@@ -11,10 +11,10 @@ import pytest
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from ros_helpers import Client, NodeProcess
 from sensor_msgs.msg import JointState
-from wifi_place_recognition.fingerprints import read_fingerprints
-from wifi_place_recognition.recording import FingerprintLog, RecordingError
-from wifi_place_recognition.replay_scans import status_values
-from wifi_place_recognition.wifi_sources import (
+from wifi_place_recognition.data.fingerprints import read_fingerprints
+from wifi_place_recognition.data.recording import FingerprintLog, RecordingError
+from wifi_place_recognition.ros.messages import status_values
+from wifi_place_recognition.data.wifi_sources import (
     nm_percent_to_dbm, parse_iw, parse_nmcli, read_source, scan,
     SourceError, wireless_interfaces)
 
@@ -134,7 +134,7 @@ def test_scanner_node_publishes_from_iw_and_reports_errors(
                                     diags.append, RELIABLE)]
     env = dict(os.environ)
     good = NodeProcess(tmp_path, python_module(
-        'wifi_scanner_node', '--ros-args', '-p', 'interface:=wlan7', '-p',
+        'ros.wifi_scanner_node', '--ros-args', '-p', 'interface:=wlan7', '-p',
         'period:=0.2'), 'scanner_ok', env=env)
     try:
         assert wait_until(lambda: scans, 20, ros), good.stop()[1]
@@ -148,7 +148,7 @@ def test_scanner_node_publishes_from_iw_and_reports_errors(
 
     (fake_tools.folder / 'iw').unlink()          # the tool disappears
     bad = NodeProcess(tmp_path, python_module(
-        'wifi_scanner_node', '--ros-args', '-p', 'interface:=wlan7', '-p',
+        'ros.wifi_scanner_node', '--ros-args', '-p', 'interface:=wlan7', '-p',
         'period:=0.2', '-p', 'sources:=[iw, nmcli]'), 'scanner_bad', env=env)
 
     def errors():
@@ -191,7 +191,7 @@ def test_the_whole_loop_in_a_simulated_building(ros, tmp_path):
     sim = FloorSimulator()
     csv_path = tmp_path / 'building.csv'
     recorder = NodeProcess(tmp_path, python_module(
-        'record_fingerprints', '--ros-args', '-p', f'output:={csv_path}'),
+        'ros.record_fingerprints', '--ros-args', '-p', f'output:={csv_path}'),
         'record_fingerprints')
     client = Client(ros, 'record_fingerprints')
     try:
@@ -215,13 +215,13 @@ def test_the_whole_loop_in_a_simulated_building(ros, tmp_path):
 
     model = tmp_path / 'building.npz'
     # A few hundred scans: many more epochs than the UJIIndoorLoc default.
-    trained = run(python_module('train_model', '--data', csv_path, '-o',
+    trained = run(python_module('cli.train_model', '--data', csv_path, '-o',
                                 model, *FAST, '--epochs', '150',
                                 '--patience', '50'))
     assert trained.returncode == 0, trained.stderr
 
     node = NodeProcess(tmp_path, python_module(
-        'classifier_node', '--ros-args', '-p', f'model_path:={model}'),
+        'ros.classifier_node', '--ros-args', '-p', f'model_path:={model}'),
         'classifier_node')
     client = Client(ros, 'classifier_node')
     try:
@@ -252,7 +252,7 @@ def test_killed_recorder_continues_the_same_file(ros, tmp_path):
     for attempt in range(2):
         progress.clear()
         recorder = NodeProcess(tmp_path, python_module(
-            'record_fingerprints', '--ros-args', '-p', f'output:={csv_path}',
+            'ros.record_fingerprints', '--ros-args', '-p', f'output:={csv_path}',
             '-p', 'building:=0', '-p', 'floor:=1'), 'record_fingerprints')
         client = Client(ros, 'record_fingerprints')
         before = totals[-1] if totals else 0

@@ -5,16 +5,17 @@ import subprocess
 import sys
 import time
 
-from conftest import FAST, python_module, synthetic_csv, wait_until
+from conftest import (FAST, python_module, synthetic_csv, TEST_DIR,
+                      wait_until)
 import numpy as np
 import pytest
 from ros_helpers import running_node
-from wifi_place_recognition.artifact import load_model
-from wifi_place_recognition.fuzz import fuzz_scans
-from wifi_place_recognition.replay_scans import status_values
+from wifi_place_recognition.core.artifact import load_model
+from fuzz import fuzz_scans
+from wifi_place_recognition.ros.messages import status_values
 
-SAVE_LOOP = ('import sys; from wifi_place_recognition.fuzz import '
-             'rewrite_forever; rewrite_forever(sys.argv[1])')
+SAVE_LOOP = (f'import sys; sys.path.insert(0, {str(TEST_DIR)!r}); '
+             'from fuzz import rewrite_forever; rewrite_forever(sys.argv[1])')
 
 
 def test_sigkill_while_saving_never_tears_the_model_file(tmp_path):
@@ -37,7 +38,7 @@ def test_sigkill_while_saving_never_tears_the_model_file(tmp_path):
 def test_sigkill_of_train_model_keeps_the_previous_artifact(tmp_path):
     data = synthetic_csv(tmp_path / 'a.csv')
     path = tmp_path / 'model.npz'
-    argv = python_module('train_model', '--data', data, '-o', path, *FAST)
+    argv = python_module('cli.train_model', '--data', data, '-o', path, *FAST)
     assert subprocess.run(argv, capture_output=True).returncode == 0
     before = path.read_bytes()
     for delay in (0.5, 1.5, 2.5):

@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
-from wifi_place_recognition.artifact import load_model, save_model
-from wifi_place_recognition.preprocessing import RssiScaler
-from wifi_place_recognition.recognizer import OK, PlaceRecognizer, WARN
-from wifi_place_recognition.scan import (
+from wifi_place_recognition.core.artifact import load_model, save_model
+from wifi_place_recognition.core.preprocessing import RssiScaler
+from wifi_place_recognition.core.recognizer import OK, PlaceRecognizer, WARN
+from wifi_place_recognition.core.scan import (
     normalize_ap_id, ScanMapper, ScanRejected)
-from wifi_place_recognition.training import augment, TrainConfig
+from wifi_place_recognition.training.trainer import augment, TrainConfig
 
 
 @pytest.mark.parametrize('given, expected', [

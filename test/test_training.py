@@ -7,11 +7,11 @@ from conftest import dataset_file, FAST, python_module, run, synthetic_csv
 import numpy as np
 import pytest
 import torch
-from wifi_place_recognition.artifact import load_model
-from wifi_place_recognition.fingerprints import read_fingerprints
-from wifi_place_recognition.fuzz import hostile_model_files
-from wifi_place_recognition.model import ScanForward
-from wifi_place_recognition.training import (
+from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.data.fingerprints import read_fingerprints
+from fuzz import hostile_model_files
+from wifi_place_recognition.core.model import ScanForward
+from wifi_place_recognition.training.trainer import (
     split_validation, train, TrainConfig)
 
 SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
@@ -91,7 +91,7 @@ def test_numpy_matches_torch_on_real_data():
 
 def test_shipped_model_reaches_the_paper_level():
     result = run(python_module(
-        'evaluate_model', '--json', '--data',
+        'cli.evaluate_model', '--json', '--data',
         dataset_file('validationData-public.csv')))
     assert result.returncode == 0, result.stderr
     scores = json.loads(result.stdout)
@@ -105,14 +105,14 @@ def test_train_then_evaluate_on_the_command_line(tmp_path):
     data = synthetic_csv(tmp_path / 'a.csv')
     model = tmp_path / 'out' / 'model.npz'
     (tmp_path / 'out').mkdir()
-    result = run(python_module('train_model', '--data', data, '-o', model,
+    result = run(python_module('cli.train_model', '--data', data, '-o', model,
                                '--test', data, *FAST))
     assert result.returncode == 0, result.stderr
     assert 'building floor accuracy' in result.stdout
     assert load_model(model).provenance['config']['epochs'] == 15
 
     preds = tmp_path / 'pred.csv'
-    result = run(python_module('evaluate_model', '--model', model, '--data',
+    result = run(python_module('cli.evaluate_model', '--model', model, '--data',
                                data, '--json', '--predictions', preds))
     assert result.returncode == 0, result.stderr
     scores = json.loads(result.stdout)
@@ -141,7 +141,7 @@ def test_train_model_bad_csv_exits_2_and_writes_nothing(
     data = tmp_path / 'bad.csv'
     data.write_text(content)
     model = tmp_path / 'model.npz'
-    result = run(python_module('train_model', '--data', data, '-o', model,
+    result = run(python_module('cli.train_model', '--data', data, '-o', model,
                                *FAST))
     assert result.returncode == 2
     assert message in result.stderr and 'Traceback' not in result.stderr
@@ -158,7 +158,7 @@ def test_evaluate_model_bad_inputs_exit_2_without_traceback(
             (['--model', model, '--data', tmp_path / 'none.csv'],
              'cannot read'),
             (['--model', model], 'no data given')]:
-        result = run(python_module('evaluate_model', *args))
+        result = run(python_module('cli.evaluate_model', *args))
         assert result.returncode == 2, args
         assert message in result.stderr
         assert 'Traceback' not in result.stderr

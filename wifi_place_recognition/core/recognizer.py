@@ -32,12 +32,14 @@ class PlaceRecognizer:
     The level is WARN when the confidence is below ``min_confidence`` or
     fewer than ``min_known_aps`` APs of the scan are known to the model.
     :meth:`classify` raises :class:`ScanRejected` for a scan it cannot use.
+    ``forward`` turns a model-ordered RSSI vector into class probabilities
+    (default: the numpy :class:`ScanForward` of ``model``).
     """
 
     def __init__(self, model, min_confidence=0.5, min_known_aps=3,
-                 max_aps=4096):
+                 max_aps=4096, forward=None):
         self.model = model
-        self.forward = ScanForward(model)
+        self.forward = forward or ScanForward(model)
         self.mapper = ScanMapper(model.ap_ids, max_aps)
         self.min_confidence = min_confidence
         self.min_known_aps = min_known_aps

@@ -11,6 +11,10 @@ SCALINGS = ('joint', 'independent')
 REPRESENTATIONS = ('dbm', 'powed', 'exponential')
 
 
+class NotFittedError(ValueError, AttributeError):
+    """A scaler used before :meth:`RssiScaler.fit`."""
+
+
 class RssiScaler:
     """
     Fill not-detected APs with a constant, then standardise.
@@ -67,7 +71,14 @@ class RssiScaler:
 
         With ``columns``, ``rssi`` holds only those APs' values (last axis).
         """
+        if not hasattr(self, 'mean_'):
+            raise NotFittedError('this RssiScaler is not fitted yet: call '
+                                 'fit() with training scans first')
         if columns is None:
+            rssi = np.asarray(rssi)
+            if rssi.shape[-1:] != self.mean_.shape:
+                raise ValueError(f'expected {len(self.mean_)} AP columns '
+                                 f'(fitted width), got shape {rssi.shape}')
             return (self.fill(rssi) - self.mean_) / self.std_
         return (self.fill(rssi) - self.mean_[columns]) / self.std_[columns]
 

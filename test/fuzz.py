@@ -87,7 +87,8 @@ def hostile_model_files(valid, folder, marker):
     a matching checksum), and two pickle payloads that would create
     ``marker`` if anything unpickled them.
     """
-    from .artifact import _digest  # the checksum, to forge a consistent file
+    # the checksum, to forge a consistent file
+    from wifi_place_recognition.core.artifact import _digest
     folder = Path(folder)
     data = Path(valid).read_bytes()
     files = {}
@@ -129,9 +130,9 @@ def rewrite_forever(path, n_aps=2000):
 
     Prints the number of each completed write.
     """
-    from .artifact import save_model
-    from .model import Layer, PlaceModel
-    from .preprocessing import RssiScaler
+    from wifi_place_recognition.core.artifact import save_model
+    from wifi_place_recognition.core.model import Layer, PlaceModel
+    from wifi_place_recognition.core.preprocessing import RssiScaler
     scaler = RssiScaler().fit(np.full((2, n_aps), -60.0))
     layers = [Layer(np.ones((n_aps, n_aps), np.float32),
                     np.zeros(n_aps, np.float32), 'relu'),

@@ -23,8 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_write
-from .rssi import clip_plausible, RssiError
+from ..core.atomic import atomic_write
+from ..core.metrics import class_index
+from ..core.rssi import clip_plausible, RssiError
 
 #: Columns that are never APs (UJIIndoorLoc metadata, plus the recorder's).
 META_COLUMNS = ('LONGITUDE', 'LATITUDE', 'FLOOR', 'BUILDINGID', 'SPACEID',
@@ -180,18 +181,18 @@ def check_trainable(fp, min_scans=2):
     rows = np.flatnonzero(~fp.empty_rows)
     if not len(rows):
         raise DataError(f'{fp.source}: no scan detects any AP')
-    labels = fp.building[rows] * 1000 + fp.floor[rows]
-    classes, first, counts = np.unique(labels, return_index=True,
-                                       return_counts=True)
+    classes, labels = class_index(fp.building[rows], fp.floor[rows])
+    _, first, counts = np.unique(labels, return_index=True,
+                                 return_counts=True)
     if len(classes) < 2:
         raise DataError(f'{fp.source}: only one building/floor class '
-                        f'(building {classes[0] // 1000}, floor '
-                        f'{classes[0] % 1000}); need at least two')
-    for label, i, count in zip(classes, first, counts):
+                        f'(building {classes[0][0]}, floor '
+                        f'{classes[0][1]}); need at least two')
+    for (building, floor), i, count in zip(classes, first, counts):
         if count < min_scans:
             raise DataError(
                 f'{fp.source}: row {rows[i] + 2}, columns BUILDINGID/FLOOR: '
-                f'building {label // 1000}, floor {label % 1000} has '
+                f'building {building}, floor {floor} has '
                 f'{count} scan(s), fewer than {min_scans} (a typo in a '
                 f'label?)')
 

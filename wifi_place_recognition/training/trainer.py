@@ -17,10 +17,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from .fingerprints import check_trainable
-from .metrics import accuracies
-from .model import Layer, PlaceModel
-from .preprocessing import RssiScaler
+from ..data.fingerprints import check_trainable
+from ..core.metrics import accuracies, class_index
+from ..core.model import Layer, mean_softmax, PlaceModel
+from ..core.preprocessing import RssiScaler
 
 TORCH_ACTIVATIONS = {'relu': nn.ReLU, 'elu': nn.ELU, 'tanh': nn.Tanh}
 VALIDATIONS = ('phone', 'random', 'none')
@@ -120,7 +120,7 @@ def split_validation(fp, config):
     phones = fp.meta.get('PHONEID')
     if config.validation == 'random' or phones is None:
         return rng.random(n) < config.validation_fraction
-    labels = fp.building * 1000 + fp.floor
+    labels = class_index(fp.building, fp.floor)[1]
     held = np.zeros(n, bool)
     for phone in rng.permutation(np.unique(phones)):
         if held.sum() >= config.validation_fraction * n:
@@ -234,14 +234,14 @@ def _pretrain_sae(net, batches, config, log):
 
 def _predict_labels(nets, x, classes):
     """Return (building, floor) from the mean softmax of ``nets``."""
+    logits = []
     with torch.no_grad():
-        proba = 0
         for net in nets:
             was_training = net.training
             net.eval()
-            proba = proba + torch.softmax(net(x), dim=1)
+            logits.append(net(x).numpy())
             net.train(was_training)
-    best = proba.argmax(dim=1).numpy()
+    best = mean_softmax(logits).argmax(axis=1)
     return classes[best, 0], classes[best, 1]
 
 
@@ -307,10 +307,8 @@ def train(fp, config, log=print):
     usable = ~fp.empty_rows
     report.dropped_empty = int((~usable).sum())
     fp = fp.subset(usable)
-    classes = np.unique(np.stack([fp.building, fp.floor], axis=1), axis=0)
-    class_index = {tuple(c): i for i, c in enumerate(classes)}
-    y_all = torch.as_tensor([class_index[(b, f)]
-                             for b, f in zip(fp.building, fp.floor)])
+    classes, y_all = class_index(fp.building, fp.floor)
+    y_all = torch.as_tensor(y_all)
     held = split_validation(fp, config)
     report.train_samples = int((~held).sum())
     report.validation_samples = int(held.sum())

@@ -23,11 +23,11 @@ from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
-from .artifact import load_model, ModelFileError
-from .node_runner import run
-from .recognizer import OK, PlaceRecognizer, WARN
-from .resources import default_model_path
-from .scan import REJECT_REASONS, ScanRejected
+from ..core.artifact import load_model, ModelFileError
+from .runner import run
+from ..core.recognizer import OK, PlaceRecognizer, WARN
+from ..core.resources import default_model_path
+from ..core.scan import REJECT_REASONS, ScanRejected
 
 LEVELS = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN}
 THROTTLE_S = 5.0
@@ -58,9 +58,14 @@ def _kv(key, value):
 
 
 class ClassifierNode(Node):
-    """Thin ROS adapter around :class:`PlaceRecognizer`."""
+    """
+    Thin ROS adapter around :class:`PlaceRecognizer`.
 
-    def __init__(self, **kwargs):
+    ``make_forward(model)`` may supply another forward pass (a benchmark
+    baseline); the default is the recognizer's numpy one.
+    """
+
+    def __init__(self, make_forward=None, **kwargs):
         super().__init__('classifier_node', **kwargs)
         model_path = self.declare_parameter(
             'model_path', '', ParameterDescriptor(
@@ -86,9 +91,10 @@ class ClassifierNode(Node):
                     from_value=1, to_value=1000000, step=1)])).value
 
         self.model_path = model_path
-        self.recognizer = PlaceRecognizer(load_model(model_path),
-                                          min_confidence, min_known_aps,
-                                          max_aps)
+        model = load_model(model_path)
+        self.recognizer = PlaceRecognizer(
+            model, min_confidence, min_known_aps, max_aps,
+            make_forward(model) if make_forward else None)
         self.prob_keys = [f'prob/{n}' for n in
                           self.recognizer.model.class_names]
         self.add_on_set_parameters_callback(self._validate_parameters)

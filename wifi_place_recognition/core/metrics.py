@@ -3,6 +3,19 @@
 import numpy as np
 
 
+def class_index(building, floor):
+    """
+    Return the distinct (building, floor) classes and each scan's class.
+
+    ``classes`` is a sorted int64 (k, 2) array, ``index`` (n,) the row of
+    each scan's class in it.
+    """
+    pairs = np.stack([np.asarray(building, np.int64),
+                      np.asarray(floor, np.int64)], axis=1)
+    classes, index = np.unique(pairs, axis=0, return_inverse=True)
+    return classes, index.reshape(-1)
+
+
 def accuracies(building, floor, pred_building, pred_floor):
     """Return building, floor (number right) and building+floor accuracy."""
     b_ok = np.asarray(building) == np.asarray(pred_building)

@@ -17,8 +17,8 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
-from .node_runner import run
-from .recording import FingerprintLog, RecordingError
+from .runner import run
+from ..data.recording import FingerprintLog, RecordingError
 
 PROGRESS_EVERY = 20
 

@@ -24,6 +24,15 @@ ACTIVATIONS = {'relu': _relu, 'elu': _elu, 'linear': _identity,
                'tanh': np.tanh}
 
 
+def mean_softmax(member_logits):
+    """Return the mean over members of softmax(logits) along the last axis."""
+    total = 0.0
+    for x in member_logits:
+        x = np.exp(x - x.max(axis=-1, keepdims=True))
+        total = total + x / x.sum(axis=-1, keepdims=True)
+    return total / len(member_logits)
+
+
 @dataclass
 class Layer:
     """A dense layer ``activation(x @ weight.T + bias)`` (torch layout)."""
@@ -50,17 +59,20 @@ class PlaceModel:
 
     def predict_proba(self, rssi):
         """Return class probabilities, shape (n, k), for (n, n_aps) RSSI."""
-        inputs = self.scaler.transform(np.atleast_2d(rssi))
-        total = 0.0
-        for layers in self.members:
-            x = inputs
-            for layer in layers:
-                x = ACTIVATIONS[layer.activation](
-                    x @ layer.weight.T + layer.bias)
-            x -= x.max(axis=1, keepdims=True)
-            np.exp(x, out=x)
-            total = total + x / x.sum(axis=1, keepdims=True)
-        return total / len(self.members)
+        rssi = np.asarray(rssi, dtype=np.float32)
+        if rssi.ndim != 2 or rssi.shape[1] != len(self.ap_ids):
+            raise ValueError(f'expected RSSI of shape (n, {len(self.ap_ids)})'
+                             f' (one column per model AP), got shape '
+                             f'{rssi.shape}')
+        inputs = self.scaler.transform(rssi)
+        return mean_softmax([self._logits(inputs, layers)
+                             for layers in self.members])
+
+    @staticmethod
+    def _logits(x, layers):
+        for layer in layers:
+            x = ACTIVATIONS[layer.activation](x @ layer.weight.T + layer.bias)
+        return x
 
     def predict(self, rssi):
         """Return (building, floor, confidence, probabilities) arrays."""
@@ -103,12 +115,11 @@ class ScanForward:
         columns = np.flatnonzero(~np.isnan(rssi))
         delta = self.model.scaler.transform(rssi[columns], columns) - \
             self.blank[columns]
-        total = 0.0
+        logits = []
         for (first_t, first_bias, first_act), rest in zip(self.first,
                                                           self.rest):
             x = first_act(first_bias + delta @ first_t[columns])
             for weight_t, bias, activation in rest:
                 x = activation(x @ weight_t + bias)
-            x = np.exp(x - x.max())
-            total = total + x / x.sum()
-        return total / len(self.model.members)
+            logits.append(x)
+        return mean_softmax(logits)

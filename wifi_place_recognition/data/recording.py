@@ -14,10 +14,10 @@ import math
 import os
 from pathlib import Path
 
-from .atomic import atomic_write
+from ..core.atomic import atomic_write
 from .fingerprints import NOT_DETECTED_MARKER
-from .rssi import CLIP_LIMIT_DBM, MAX_DBM, MIN_DBM
-from .scan import normalize_ap_id
+from ..core.rssi import CLIP_LIMIT_DBM, MAX_DBM, MIN_DBM
+from ..core.scan import normalize_ap_id
 
 LEADING = ('BUILDINGID', 'FLOOR', 'TIMESTAMP')
 MISSING = f'{NOT_DETECTED_MARKER:g}'

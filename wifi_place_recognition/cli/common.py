@@ -5,8 +5,8 @@ import os
 import sys
 from pathlib import Path
 
-from .artifact import ModelFileError
-from .fingerprints import DataError, download_uci
+from ..core.artifact import ModelFileError
+from ..data.fingerprints import DataError, download_uci
 
 DEFAULT_CACHE = Path(os.environ.get('XDG_CACHE_HOME', Path.home() / '.cache')
                      ) / 'wifi_place_recognition'
@@ -43,3 +43,17 @@ def main_wrapper(main):
         except KeyboardInterrupt:
             return 130
     return wrapped
+
+
+def print_report(result, model, source):
+    """Print the accuracies and the confusion matrix, human-readable."""
+    print(f'{source}: {result["samples"]} scans '
+          f'({result["rows_without_ap"]} without any AP)')
+    for key in ('building_accuracy', 'floor_accuracy',
+                'building_floor_accuracy'):
+        print(f'  {key.replace("_", " "):24s} {result[key]:.4f}')
+    names = result['classes']
+    print('confusion (rows: true, columns: predicted)')
+    print('      ' + ' '.join(f'{n:>5s}' for n in names))
+    for name, row in zip(names, result['confusion']):
+        print(f'{name:>5s} ' + ' '.join(f'{v:5d}' for v in row))

@@ -17,8 +17,8 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
-from .node_runner import run
-from .wifi_sources import scan, SOURCES, SourceError, wireless_interfaces
+from .runner import run
+from ..data.wifi_sources import scan, SOURCES, SourceError, wireless_interfaces
 
 THROTTLE_S = 30.0
 

@@ -4,11 +4,12 @@ import argparse
 import sys
 from dataclasses import fields
 
-from .artifact import save_model
-from .cli import add_download_arguments, data_path, main_wrapper
-from .evaluate_model import evaluate, print_report
-from .fingerprints import read_fingerprints
-from .training import TrainConfig, train
+from ..core.artifact import save_model
+from ..core.evaluation import evaluate
+from ..data.fingerprints import read_fingerprints
+from ..training.trainer import TrainConfig, train
+from .common import (add_download_arguments, data_path, main_wrapper,
+                     print_report)
 
 
 def _layers(text):

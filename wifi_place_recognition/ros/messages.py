@@ -1,0 +1,19 @@
+"""Conversions between ROS messages and plain Python values."""
+
+from sensor_msgs.msg import JointState
+import numpy as np
+
+
+def status_values(status):
+    """Return a DiagnosticStatus's key/values as a dict."""
+    return {kv.key: kv.value for kv in status.values}
+
+
+def scan_message(ap_ids, rssi, stamp, frame_id='replay'):
+    """Return a JointState scan of the detected (non-NaN) APs of one row."""
+    detected = np.flatnonzero(np.isfinite(rssi))
+    msg = JointState(name=[ap_ids[j] for j in detected],
+                     position=rssi[detected].astype(float).tolist())
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    return msg

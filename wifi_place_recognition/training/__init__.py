@@ -1,0 +1,1 @@
+"""Training with torch: the network, selection on held-out groups, the trainer."""
