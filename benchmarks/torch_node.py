@@ -13,7 +13,7 @@ from wifi_place_recognition.core.artifact import ModelFileError
 from wifi_place_recognition.core.model import mean_softmax
 from wifi_place_recognition.ros.classifier_node import ClassifierNode
 from wifi_place_recognition.ros.runner import run
-from wifi_place_recognition.training.trainer import TORCH_ACTIVATIONS
+from wifi_place_recognition.training.network import TORCH_ACTIVATIONS
 
 
 def _torch_net(layers):

@@ -1,5 +1,6 @@
 """Shared fixtures: synthetic fingerprints, a small trained model, ROS set-up."""
 
+import fcntl
 import os
 from pathlib import Path
 import subprocess
@@ -9,8 +10,39 @@ import time
 import numpy as np
 import pytest
 
-# Every test run gets its own DDS domain, set before any rclpy.init().
-os.environ['ROS_DOMAIN_ID'] = str(10 + os.getpid() % 90)
+DOMAIN_IDS = range(10, 100)
+
+
+def claim_domain_id(ids=DOMAIN_IDS):
+    """
+    Return (domain id, lock file) for an id no other live test run holds.
+
+    Each id is an exclusive ``flock`` on a file in /tmp, held until the
+    returned file is closed (here: for the whole session; the kernel drops
+    it when the process dies).
+    """
+    start = os.getpid() % len(ids)
+    for k in range(len(ids)):
+        domain = ids[(start + k) % len(ids)]
+        try:
+            lock = open(f'/tmp/wifi_place_recognition-domain-{domain}.lock',
+                        'a')
+        except OSError:
+            continue
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        return domain, lock
+    raise RuntimeError(f'every ROS domain id in {ids.start}..{ids.stop - 1} '
+                       f'is held by another live test run')
+
+
+# Every test run gets its own DDS domain, set before any rclpy.init();
+# child processes inherit it through the environment.
+DOMAIN_ID, _DOMAIN_LOCK = claim_domain_id()
+os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
 TEST_DIR = Path(__file__).resolve().parent
@@ -54,7 +86,8 @@ def synthetic_csv(path, scans_per_class=60, n_aps=24, seed=0, phones=4):
 
 
 FAST = ['--sae-layers', '32,16', '--classifier-layers', '16',
-        '--sae-epochs', '3', '--epochs', '15', '--quiet']
+        '--sae-epochs', '3', '--epochs', '15', '--batch-size', '32',
+        '--folds', '2', '--ensemble', '1', '--quiet']
 
 
 @pytest.fixture(scope='session')

@@ -7,7 +7,8 @@ from wifi_place_recognition.core.preprocessing import RssiScaler
 from wifi_place_recognition.core.recognizer import OK, PlaceRecognizer, WARN
 from wifi_place_recognition.core.scan import (
     normalize_ap_id, ScanMapper, ScanRejected)
-from wifi_place_recognition.training.trainer import augment, TrainConfig
+from wifi_place_recognition.training.augment import ScanAugmenter
+from wifi_place_recognition.training.config import TrainConfig
 
 
 @pytest.mark.parametrize('given, expected', [
@@ -67,9 +68,11 @@ def test_augment_is_seeded_and_stays_plausible():
                          augment_noise=2, augment_dropout=0.2)
     rssi = np.full((50, 30), -70, np.float32)
     rssi[:, 20:] = np.nan
-    a = augment(rssi, config, np.random.default_rng(1))
-    b = augment(rssi, config, np.random.default_rng(1))
+    a = ScanAugmenter(rssi, config, seed=1)()
+    b = ScanAugmenter(rssi, config, seed=1)()
     np.testing.assert_array_equal(a, b)
+    augmenter = ScanAugmenter(rssi, config, seed=1)
+    assert not np.array_equal(augmenter(), augmenter(), equal_nan=True)
     assert np.isnan(a[:, 20:]).all()
     detected = a[np.isfinite(a)]
     assert detected.max() <= 0 and detected.min() >= -110

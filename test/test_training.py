@@ -10,38 +10,50 @@ import torch
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from fuzz import hostile_model_files
-from wifi_place_recognition.core.model import ScanForward
-from wifi_place_recognition.training.trainer import (
-    split_validation, train, TrainConfig)
+from wifi_place_recognition.core.metrics import class_index
+from wifi_place_recognition.core.model import mean_softmax, ScanForward
+from wifi_place_recognition.training.config import TrainConfig
+from wifi_place_recognition.training.selection import grouped_folds
+from wifi_place_recognition.training.trainer import train
 
 SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
-             epochs=15)
+             epochs=15, batch_size=32, ensemble=1)
 
 
 def _torch_proba(nets, model, rssi):
     x = torch.as_tensor(model.scaler.transform(rssi))
     with torch.no_grad():
-        return (sum(torch.softmax(net(x), dim=1) for net in nets)
-                / len(nets)).numpy()
+        return mean_softmax([net(x).numpy() for net in nets])
 
 
 def test_same_seed_same_model(tmp_path):
     fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv'))
     a, _, ra = train(fp, TrainConfig(**SMALL), log=lambda s: None)
     b, _, rb = train(fp, TrainConfig(**SMALL), log=lambda s: None)
-    assert ra.validation == rb.validation and ra.best_epoch == rb.best_epoch
+    assert ra.selection == rb.selection and ra.epochs == rb.epochs
     for la, lb in zip(a.members[0], b.members[0]):
         np.testing.assert_array_equal(la.weight, lb.weight)
+
+
+def test_training_leaves_torch_global_state_alone(tmp_path):
+    fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv'))
+    threads, rng = torch.get_num_threads(), torch.get_rng_state()
+    train(fp, TrainConfig(threads=1, **dict(SMALL, epochs=2, folds=0)),
+          log=lambda s: None)
+    assert torch.get_num_threads() == threads
+    assert torch.equal(torch.get_rng_state(), rng)
 
 
 def test_learns_the_synthetic_building_and_numpy_matches_torch(tmp_path):
     fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv'))
     test = read_fingerprints(synthetic_csv(tmp_path / 'b.csv', seed=0))
-    config = TrainConfig(ensemble=2, refit=True, ema_epochs=1, **SMALL)
+    config = TrainConfig(**dict(SMALL, ensemble=2))
     model, nets, report = train(fp, config, log=lambda s: None)
     _, _, _, proba = model.predict(test.rssi)
     assert len(model.members) == len(nets) == 2
-    assert report.validation['building_floor_accuracy'] > 0.9
+    assert report.selection['accuracy_mean'] > 0.9
+    assert 1 <= report.epochs <= config.epochs
+    assert report.epochs == model.provenance['epochs']
     reference = _torch_proba(nets, model, test.rssi)
     np.testing.assert_allclose(proba, reference, atol=1e-5)
     forward = ScanForward(model)
@@ -49,35 +61,57 @@ def test_learns_the_synthetic_building_and_numpy_matches_torch(tmp_path):
                                reference, atol=1e-5)
 
 
-def test_phone_split_holds_out_whole_phones_and_keeps_every_class(tmp_path):
+def test_folds_hold_out_whole_phones_and_keep_every_class(tmp_path):
     fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv', phones=6))
-    held = split_validation(fp, TrainConfig(seed=3))
+    labels = class_index(fp.building, fp.floor)[1]
+    folds = grouped_folds(fp, labels, 3, seed=3)
     phones = fp.meta['PHONEID']
-    assert held.any()
-    assert not set(phones[held]) & set(phones[~held])
-    classes = set(zip(fp.building, fp.floor))
-    assert set(zip(fp.building[~held], fp.floor[~held])) == classes
+    assert folds.grouping == 'device' and len(folds.held_out) == 3
+    assert sum(m.sum() for m in folds.held_out) == len(fp)
+    for held in folds.held_out:
+        assert not set(phones[held]) & set(phones[~held])
+        assert set(labels[~held]) == set(labels)
 
 
-def test_random_split_without_phone_column(tmp_path):
+def test_folds_keep_a_class_that_only_one_phone_saw_in_training(tmp_path):
+    fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv', phones=6))
+    phones = fp.meta['PHONEID'].copy()
+    phones[(fp.building == 1) & (fp.floor == 1)] = 99  # only phone 99
+    fp.meta['PHONEID'] = phones
+    labels = class_index(fp.building, fp.floor)[1]
+    folds = grouped_folds(fp, labels, 3)
+    for held in folds.held_out:
+        assert set(labels[~held]) == set(labels)
+        assert not (phones[held] == 99).any()
+    assert len(folds.never_held_out) == 1
+
+
+def test_time_blocks_without_device_or_walk(tmp_path):
     fp = read_fingerprints(synthetic_csv(tmp_path / 'a.csv'))
     fp.meta.pop('PHONEID')
-    held = split_validation(fp, TrainConfig(validation_fraction=0.25))
-    assert 0.15 < held.mean() < 0.35
+    labels = class_index(fp.building, fp.floor)[1]
+    folds = grouped_folds(fp, labels, 4)
+    assert folds.grouping == 'time'
+    for held in folds.held_out:  # contiguous blocks of file order
+        rows = np.flatnonzero(held)
+        assert 0.1 < held.mean() < 0.4
+        assert len(np.unique(np.diff(rows) > 1)) <= 2
 
 
 def test_bad_config_values_are_refused():
     with pytest.raises(ValueError, match='dropout'):
         TrainConfig(dropout=1.5)
-    with pytest.raises(ValueError, match='validation must be one of'):
-        TrainConfig(validation='test-file')
+    with pytest.raises(ValueError, match='grouping must be one of'):
+        TrainConfig(grouping='test-file')
+    with pytest.raises(ValueError, match='folds must be'):
+        TrainConfig(folds=1)
 
 
 def test_numpy_matches_torch_on_real_data():
     fp = read_fingerprints(dataset_file('trainingData.csv'))
     test = read_fingerprints(dataset_file('validationData-public.csv'))
-    model, nets, _ = train(fp, TrainConfig(sae_epochs=1, epochs=2),
-                           log=lambda s: None)
+    model, nets, _ = train(fp, TrainConfig(sae_epochs=1, epochs=2, folds=0,
+                                           ensemble=2), log=lambda s: None)
     proba = model.predict_proba(test.rssi)
     ref = _torch_proba(nets, model, test.rssi)
     assert np.abs(proba - ref).max() <= 1e-5

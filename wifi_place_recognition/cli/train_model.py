@@ -7,7 +7,8 @@ from dataclasses import fields
 from ..core.artifact import save_model
 from ..core.evaluation import evaluate
 from ..data.fingerprints import read_fingerprints
-from ..training.trainer import TrainConfig, train
+from ..training.config import TrainConfig
+from ..training.trainer import train
 from .common import (add_download_arguments, data_path, main_wrapper,
                      print_report)
 
@@ -31,7 +32,9 @@ def build_parser():
                    help='no per-epoch progress lines')
     add_download_arguments(p)
     defaults = TrainConfig()
-    g = p.add_argument_group('model and training (defaults: the paper)')
+    g = p.add_argument_group(
+        'model and training (defaults: the paper\'s network plus what '
+        'cross-validation chose; see the README)')
     for f in fields(TrainConfig):
         default = getattr(defaults, f.name)
         flag = '--' + f.name.replace('_', '-')
@@ -70,15 +73,15 @@ def main(argv=None):
     model, _, report = train(train_fp, config, log)
     save_model(model, args.output)
     print(f'wrote {args.output}: {len(model.ap_ids)} APs, '
-          f'{len(model.classes)} classes, trained in {report.seconds:.1f} s '
-          f'(best epoch {report.best_epoch}; {report.dropped_empty} scans '
-          f'without any AP left out)')
-    if report.validation:
-        print(f'held-out ({report.validation_mode}'
-              + (f' {report.validation_phones}'
-                 if report.validation_phones else '')
-              + f', {report.validation_samples} scans): building+floor '
-              f'{report.validation["building_floor_accuracy"]:.4f}')
+          f'{len(model.classes)} classes, {len(model.members)} network(s) '
+          f'of {report.epochs} epochs, trained in {report.seconds:.1f} s '
+          f'({report.dropped_empty} scans without any AP left out)')
+    if report.selection:
+        s = report.selection
+        print(f'cross-validated ({len(s["folds"])} folds of whole '
+              f'{s["grouping"]} groups): building+floor '
+              f'{s["accuracy_mean"]:.4f} ({s["accuracy_min"]:.4f}-'
+              f'{s["accuracy_max"]:.4f} over folds)')
     if test_fp is not None:
         print_report(evaluate(model, test_fp), model, test_fp.source)
     return 0

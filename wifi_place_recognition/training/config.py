@@ -1,0 +1,83 @@
+"""Every choice that shapes a trained model, checked before training starts."""
+
+from dataclasses import dataclass
+
+ACTIVATION_NAMES = ('relu', 'elu', 'tanh')
+GROUPINGS = ('auto', 'device', 'walk', 'time', 'none')
+
+
+@dataclass
+class TrainConfig:
+    """
+    The training recipe; stored whole in the model file.
+
+    Defaults: the paper's network (SAE 256-128-64 pre-trained on
+    reconstruction, classifier 128-128 with dropout, Adam, -110 dBm for
+    undetected APs, one mean/std) plus what cross-validation over held-out
+    devices chose (benchmarks/README.md): the exponential representation,
+    phone-like augmentation, the epoch count chosen on the mean
+    cross-validated curve, then an ensemble trained on all scans.
+    """
+
+    sae_layers: tuple = (256, 128, 64)
+    classifier_layers: tuple = (128, 128)
+    activation: str = 'relu'
+    dropout: float = 0.2
+    not_detected: float = -110.0
+    scaling: str = 'joint'
+    representation: str = 'exponential'
+    augment_offset: float = 10.0  # dB, uniform +- per scan
+    augment_gain: float = 0.1     # fraction, uniform +- per scan
+    augment_noise: float = 2.0    # dB, normal std per reading
+    augment_dropout: float = 0.1  # probability to drop a detected AP
+    sae_epochs: int = 10
+    epochs: int = 30              # the most; cross-validation picks fewer
+    batch_size: int = 256
+    learning_rate: float = 2e-3
+    folds: int = 4                # cross-validation folds; 0: no selection
+    grouping: str = 'auto'        # what a fold holds out (see selection)
+    ensemble: int = 3
+    seed: int = 0
+    threads: int = 0              # 0: torch's default
+
+    def __post_init__(self):
+        """Check values so that a bad option fails before training starts."""
+        self.sae_layers = tuple(int(n) for n in self.sae_layers)
+        self.classifier_layers = tuple(int(n) for n in self.classifier_layers)
+        checks = [
+            (self.sae_layers and all(n > 0 for n in self.sae_layers +
+                                     self.classifier_layers),
+             'layer sizes must be positive (and sae_layers not empty)'),
+            (self.activation in ACTIVATION_NAMES,
+             f'activation must be one of {ACTIVATION_NAMES}'),
+            (0.0 <= self.dropout < 1.0, 'dropout must be in [0, 1)'),
+            (self.sae_epochs >= 0 and self.epochs >= 1,
+             'sae_epochs must be >= 0 and epochs >= 1'),
+            (self.folds == 0 or self.folds >= 2,
+             'folds must be 0 (no selection) or at least 2'),
+            (self.grouping in GROUPINGS,
+             f'grouping must be one of {GROUPINGS}'),
+            (self.ensemble >= 1, 'ensemble must be at least 1'),
+            (self.batch_size >= 1 and self.learning_rate > 0,
+             'batch size and learning rate must be positive'),
+            (min(self.augment_offset, self.augment_gain, self.augment_noise)
+             >= 0 and 0 <= self.augment_dropout < 1,
+             'augmentation amounts must be >= 0 (dropout < 1)'),
+            (self.threads >= 0, 'threads must be >= 0'),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(message)
+
+    @property
+    def augmenting(self):
+        """Return True when any augmentation amount is set."""
+        return bool(self.augment_offset or self.augment_gain or
+                    self.augment_noise or self.augment_dropout)
+
+
+#: The paper's recipe as overrides of the defaults: dBm input, no
+#: augmentation, one network, 20 SAE epochs at batch 64, lr 1e-3.
+PAPER = dict(representation='dbm', augment_offset=0.0, augment_gain=0.0,
+             augment_noise=0.0, augment_dropout=0.0, ensemble=1,
+             sae_epochs=20, batch_size=64, learning_rate=1e-3)
