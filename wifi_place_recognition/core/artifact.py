@@ -18,6 +18,7 @@ import numpy as np
 from .atomic import atomic_write
 from .model import ACTIVATIONS, Layer, PlaceModel
 from .preprocessing import RssiScaler
+from .tracking import TrackingParams
 
 FORMAT = 'wifi_place_recognition/model'
 SCHEMA_VERSION = 1
@@ -56,6 +57,8 @@ def save_model(model, path):
               'classes': np.asarray(model.classes).tolist(),
               'preprocessing': model.scaler.params(), 'members': members,
               'provenance': model.provenance}
+    if model.tracking is not None:
+        header['tracking'] = model.tracking.to_dict()
     header['sha256'] = _digest(header, arrays)
     arrays['header'] = np.frombuffer(json.dumps(header).encode(), np.uint8)
     with atomic_write(path) as f:
@@ -145,7 +148,17 @@ def _build(header, arrays):
     if not members:
         raise ModelFileError('the model has no network')
     return PlaceModel(ap_ids, scaler, members, classes,
-                      header.get('provenance', {}))
+                      header.get('provenance', {}), _tracking(header))
+
+
+def _tracking(header):
+    """Return the optional tracking parameters (None: the defaults)."""
+    if 'tracking' not in header:
+        return None
+    try:
+        return TrackingParams.from_dict(header['tracking'])
+    except (TypeError, ValueError) as exc:
+        raise ModelFileError(f'tracking section: {exc}') from None
 
 
 def _member(specs, arrays, n_inputs, n_classes):

@@ -56,6 +56,7 @@ class PlaceModel:
     members: list
     classes: np.ndarray           # int64 (k, 2): building, floor per output
     provenance: dict = field(default_factory=dict)
+    tracking: object = None       # TrackingParams from the file, or None
 
     def predict_proba(self, rssi):
         """Return class probabilities, shape (n, k), for (n, n_aps) RSSI."""

@@ -1,0 +1,441 @@
+"""
+Tracking building, floor and position over a walk (ROS-free, numpy only).
+
+A robot changes floor only by a lift or stairs, so its scans are not
+independent. :class:`PlaceTracker` keeps a discrete belief over the model's
+(building, floor) classes and runs one forward step of a hidden Markov model
+per scan:
+
+- predict: a floor change (within the building) and a building change are
+  Poisson events of rates ``floor_rate`` and ``building_rate`` per second,
+  so the longer since the last scan, the likelier a change; every scan
+  counts for at least ``min_interval`` seconds, so a belief can always be
+  overturned by enough evidence;
+- update: multiply by the scan's class probabilities raised to
+  ``1 / temperature`` (single-scan probabilities are over-confident, and
+  neighbouring scans of a walk make correlated errors);
+- after a gap longer than ``timeout`` seconds (or time running backwards)
+  the belief restarts from the scan alone.
+
+An optional position (x, y with a 2x2 covariance per scan) is smoothed by a
+Kalman filter with a constant-velocity motion model (white-noise
+acceleration of density ``acceleration_noise`` m^2/s^3 per axis, so the
+uncertainty grows with the time since the last scan; a new track starts at
+rest with a speed uncertainty of ``speed_sd`` m/s). It restarts whenever
+the tracked class changes.
+
+:func:`fit_rates` and :func:`fit_evidence` choose the parameters on
+training walks; :class:`TrackingParams` is what a model file stores.
+"""
+
+from dataclasses import asdict, dataclass, fields, replace
+import math
+
+import numpy as np
+
+#: Smallest class probability used as evidence (a softmax can underflow).
+MIN_PROBABILITY = 1e-12
+LOG_FLOOR = math.log(1e-6)
+# Blocks of the constant-velocity model's 4x4 matrices (x, y, vx, vy).
+_IDENTITY4 = np.eye(4)
+_VELOCITY = np.eye(4, k=2)                      # position += dt * velocity
+_POSITION = np.diag([1.0, 1.0, 0.0, 0.0])
+_SPEED = np.diag([0.0, 0.0, 1.0, 1.0])
+
+
+@dataclass(frozen=True)
+class TrackingParams:
+    """The parameters of :class:`PlaceTracker`; stored in the model file."""
+
+    floor_rate: float = 1e-3         # floor changes per second
+    building_rate: float = 1e-5      # building changes per second
+    min_interval: float = 5.0        # s: a scan counts for at least this
+    temperature: float = 2.0         # evidence = probabilities ** (1 / T)
+    acceleration_noise: float = 0.1  # m^2/s^3 per axis
+    speed_sd: float = 1.0            # m/s per axis, when a track starts
+    timeout: float = 600.0           # s: a longer gap restarts the belief
+    fit: dict = None                 # how they were chosen (free-form)
+
+    def __post_init__(self):
+        """Refuse values that would make the filter meaningless."""
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == 'fit':
+                if value is not None and not isinstance(value, dict):
+                    raise ValueError(f'tracking fit must be an object, got '
+                                     f'{type(value).__name__}')
+                continue
+            positive = f.name in ('temperature', 'timeout')
+            if isinstance(value, bool) or \
+                    not isinstance(value, (int, float)) or \
+                    not math.isfinite(value) or value < 0 or \
+                    (positive and value == 0):
+                raise ValueError(f'tracking parameter {f.name} = {value!r}: '
+                                 f'expected a finite number '
+                                 f'{"> 0" if positive else ">= 0"}')
+
+    def to_dict(self):
+        """Return a JSON-ready dict (``fit`` left out when empty)."""
+        out = asdict(self)
+        if out['fit'] is None:
+            del out['fit']
+        return out
+
+    @classmethod
+    def from_dict(cls, data):
+        """Build from :meth:`to_dict` output; raise ValueError naming a key."""
+        if not isinstance(data, dict):
+            raise ValueError(f'tracking must be an object, got '
+                             f'{type(data).__name__}')
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f'unknown tracking parameter(s) '
+                             f'{", ".join(unknown)}')
+        return cls(**data)
+
+
+@dataclass
+class Track:
+    """The tracked answer after one scan."""
+
+    index: int                # row of the tracked class in ``classes``
+    building: int
+    floor: int
+    confidence: float         # belief of the tracked class
+    belief: np.ndarray        # (k,) sums to 1
+    restarted: bool           # the belief started afresh with this scan
+    xy: np.ndarray = None     # (2,) smoothed position, or None
+    cov: np.ndarray = None    # (2, 2)
+
+
+def _jump_matrices(classes):
+    """
+    Return (floor, building) jump matrices, rows = from, columns = to.
+
+    A floor jump goes uniformly to another floor of the same building, a
+    building jump uniformly to a class of another building; a class with
+    nowhere to go keeps its mass.
+    """
+    classes = np.asarray(classes, np.int64)
+    same = classes[:, None, 0] == classes[None, :, 0]
+    other_floor = same & ~np.eye(len(classes), dtype=bool)
+    out = []
+    for allowed in (other_floor, ~same):
+        m = allowed.astype(np.float64)
+        counts = m.sum(axis=1, keepdims=True)
+        m = np.where(counts > 0, m / np.maximum(counts, 1),
+                     np.eye(len(classes)))
+        out.append(m)
+    return out
+
+
+class PositionFilter:
+    """
+    Constant-velocity Kalman filter on x, y (state x, y, vx, vy).
+
+    Between scans the state moves with its velocity and the covariance grows
+    by white-noise acceleration of density ``acceleration_noise``; a track
+    starts at the first position, at rest, with speed uncertainty
+    ``speed_sd``.
+    """
+
+    def __init__(self, params):
+        self.params = params
+        self.reset()
+
+    def reset(self):
+        """Forget the track."""
+        self.state = None     # x, y, vx, vy
+        self.cov = None
+
+    def predict(self, dt):
+        """Move the track ``dt`` seconds forward (no-op without a track)."""
+        if self.state is None:
+            return
+        move = _IDENTITY4 + dt * _VELOCITY
+        self.state = move @ self.state
+        self.cov = move @ self.cov @ move.T + (
+            self.params.acceleration_noise * dt) * (
+                dt * dt / 3 * _POSITION + dt / 2 * _VELOCITY
+                + dt / 2 * _VELOCITY.T + _SPEED)
+
+    def update(self, xy, cov):
+        """Add a position ``xy`` (2,) with covariance ``cov`` (2, 2)."""
+        xy = np.asarray(xy, np.float64)
+        cov = None if cov is None else np.asarray(cov, np.float64)
+        if xy.shape != (2,) or cov is None or cov.shape != (2, 2) or \
+                not (np.isfinite(xy).all() and np.isfinite(cov).all()):
+            raise ValueError('a position needs finite xy (2,) and cov '
+                             '(2, 2)')
+        if self.state is None:
+            self.state = np.concatenate([xy, [0.0, 0.0]])
+            self.cov = np.zeros((4, 4))
+            self.cov[:2, :2] = cov
+            self.cov[2:, 2:] = self.params.speed_sd ** 2 * np.eye(2)
+            return
+        (a, b), (c, d) = self.cov[:2, :2] + cov
+        inverse = np.array([[d, -b], [-c, a]]) / (a * d - b * c)
+        gain = self.cov[:, :2] @ inverse
+        self.state = self.state + gain @ (xy - self.state[:2])
+        self.cov = self.cov - gain @ self.cov[:2, :]
+        self.cov = (self.cov + self.cov.T) / 2
+
+
+class PlaceTracker:
+    """
+    Online filter over building/floor classes (and optionally position).
+
+    ``classes`` is the model's (k, 2) array of [building, floor]. Feed every
+    answered scan to :meth:`update`; :meth:`reset` forgets everything.
+    """
+
+    def __init__(self, classes, params=None):
+        self.classes = np.asarray(classes, np.int64)
+        self.params = params or TrackingParams()
+        self.floor_jump, self.building_jump = _jump_matrices(self.classes)
+        self.position = PositionFilter(self.params)
+        self.reset()
+
+    def reset(self):
+        """Forget the belief, the position and the last scan time."""
+        self.belief = None
+        self.index = -1
+        self.last_time = None
+        self.position.reset()
+
+    def predict(self, belief, dt):
+        """Return the belief moved forward by ``dt`` seconds."""
+        p = self.params
+        dt = max(dt, p.min_interval)
+        to_building = -math.expm1(-p.building_rate * dt)
+        to_floor = -math.expm1(-p.floor_rate * dt)
+        return ((1.0 - to_building - to_floor) * belief
+                + to_floor * (belief @ self.floor_jump)
+                + to_building * (belief @ self.building_jump))
+
+    def update(self, time, proba, xy=None, cov=None):
+        """
+        Add one scan at ``time`` (s) with class probabilities ``proba``.
+
+        ``xy`` (2,) and ``cov`` (2, 2) are the scan's position estimate, if
+        the model has one. Return the :class:`Track` after this scan.
+        """
+        evidence = np.maximum(np.asarray(proba, np.float64), MIN_PROBABILITY)
+        if evidence.shape != (len(self.classes),) or \
+                not np.isfinite(evidence).all():
+            raise ValueError(f'expected {len(self.classes)} finite class '
+                             f'probabilities, got shape {evidence.shape}')
+        evidence **= 1.0 / self.params.temperature
+        dt = None if self.last_time is None else time - self.last_time
+        restarted = (self.belief is None or dt < 0
+                     or dt > self.params.timeout)
+        belief = evidence if restarted else \
+            self.predict(self.belief, dt) * evidence
+        self.belief = belief / belief.sum()
+        self.last_time = time
+        index = int(self.belief.argmax())
+        if restarted or index != self.index:
+            self.position.reset()
+        self.index = index
+        self.position.predict(dt)
+        if xy is not None:
+            self.position.update(xy, cov)
+        building, floor = self.classes[index]
+        track = Track(index, int(building), int(floor),
+                      float(self.belief[index]), self.belief, restarted)
+        if self.position.state is not None:
+            track.xy = self.position.state[:2].copy()
+            track.cov = self.position.cov[:2, :2].copy()
+        return track
+
+
+# walks ---------------------------------------------------------------------
+def split_walks(keys, times):
+    """
+    Return index arrays of walks: scans grouped by ``keys``, in time order.
+
+    ``keys`` is a sequence of (n,) arrays (e.g. USERID and PHONEID);
+    scans with equal keys form one walk, sorted by ``times`` (stable).
+    """
+    times = np.asarray(times, np.float64)
+    order = np.lexsort((times,) + tuple(np.asarray(k) for k in
+                                        reversed(keys)))
+    if not keys:
+        return [order]
+    stacked = np.stack([np.asarray(k)[order] for k in keys], axis=1)
+    starts = np.flatnonzero(np.any(stacked[1:] != stacked[:-1], axis=1)) + 1
+    return np.split(order, starts)
+
+
+def track_walk(tracker, times, proba, xy=None, cov=None):
+    """
+    Run ``tracker`` (reset first) over one walk; return its tracks.
+
+    ``times`` (n,), ``proba`` (n, k); ``xy`` (n, 2) and ``cov`` (n, 2, 2)
+    are optional.
+    """
+    tracker.reset()
+    return [tracker.update(times[i], proba[i],
+                           None if xy is None else xy[i],
+                           None if cov is None else cov[i])
+            for i in range(len(times))]
+
+
+# fitting -------------------------------------------------------------------
+def _rate_mle(dt, changed):
+    """
+    Return the rate of ``P(change in dt) = 1 - exp(-rate dt)`` (MLE).
+
+    With no change at all, half a change over the total time is assumed
+    (a change is possible, just rarer than the data can show).
+    """
+    dt = np.asarray(dt, np.float64)
+    changed = np.asarray(changed, bool)
+    total = dt.sum()
+    if total <= 0:
+        raise ValueError('walks span no time: cannot fit change rates')
+    if not changed.any():
+        return 0.5 / total
+    if changed.all():
+        raise ValueError('every consecutive pair of scans changes place: '
+                         'cannot fit change rates')
+    d_change, stay = dt[changed], dt[~changed].sum()
+
+    def slope(rate):    # derivative of the log-likelihood, decreasing
+        x = rate * d_change
+        return float(np.sum(d_change / np.expm1(np.maximum(x, 1e-300)))
+                     - stay)
+    low, high = 1e-12, 1e3
+    for _ in range(200):
+        mid = math.sqrt(low * high)
+        if slope(mid) > 0:
+            low = mid
+        else:
+            high = mid
+    return math.sqrt(low * high)
+
+
+def fit_rates(walks, timeout=TrackingParams.timeout):
+    """
+    Fit ``floor_rate`` and ``building_rate`` on labelled walks.
+
+    ``walks`` is an iterable of (times, building, floor) arrays in time
+    order. Consecutive pairs further apart than ``timeout`` are left out
+    (the tracker restarts there). Return (floor_rate, building_rate,
+    summary dict).
+    """
+    dts, building_changed, floor_changed = [], [], []
+    for times, building, floor in walks:
+        dt = np.diff(np.asarray(times, np.float64))
+        keep = (dt >= 0) & (dt <= timeout)
+        b = np.diff(np.asarray(building)) != 0
+        f = np.diff(np.asarray(floor)) != 0
+        dts.append(dt[keep])
+        building_changed.append(b[keep])
+        floor_changed.append((f & ~b)[keep])
+    dt = np.concatenate(dts)
+    b = np.concatenate(building_changed)
+    f = np.concatenate(floor_changed)
+    building_rate = _rate_mle(dt, b)
+    floor_rate = _rate_mle(dt[~b], f[~b])
+    summary = {'pairs': int(len(dt)), 'hours': round(dt.sum() / 3600, 3),
+               'floor_changes': int(f.sum()),
+               'building_changes': int(b.sum())}
+    return floor_rate, building_rate, summary
+
+
+def filtered_scores(params, classes, walks):
+    """
+    Return (mean log belief of the true class, accuracy) of tracked walks.
+
+    ``walks`` is a list of (times, true class index, proba) in time order.
+    """
+    tracker = PlaceTracker(classes, params)
+    log_sum, right, n = 0.0, 0, 0
+    for times, truth, proba in walks:
+        for track, t in zip(track_walk(tracker, times, proba), truth):
+            log_sum += max(math.log(max(track.belief[t], 1e-300)),
+                           LOG_FLOOR)
+            right += track.index == t
+            n += 1
+    return log_sum / n, right / n
+
+
+def fit_evidence(params, classes, walks,
+                 temperatures=(1.0, 1.5, 2.0, 3.0, 4.0, 6.0),
+                 min_intervals=(0.0, 1.0, 5.0, 20.0, 60.0)):
+    """
+    Choose ``temperature`` and ``min_interval`` on walks (grid search).
+
+    ``walks`` as for :func:`filtered_scores`, with probabilities from a
+    model that did not train on them. The choice maximises the mean log
+    belief of the true class after each scan (a proper score: it rewards
+    being right and confident, and punishes being confidently wrong).
+    Return (params with the choice, grid as a list of dicts).
+    """
+    grid = []
+    for temperature in temperatures:
+        for min_interval in min_intervals:
+            candidate = replace(params, temperature=temperature,
+                                min_interval=min_interval)
+            score, accuracy = filtered_scores(candidate, classes, walks)
+            grid.append({'temperature': temperature,
+                         'min_interval': min_interval,
+                         'mean_log_belief': round(score, 5),
+                         'accuracy': round(accuracy, 5)})
+    best = max(grid, key=lambda g: g['mean_log_belief'])
+    return replace(params, temperature=best['temperature'],
+                   min_interval=best['min_interval']), grid
+
+
+def _motion_log_likelihood(params, walks, measurement_var):
+    """Return the log-likelihood of the walks' positions under the filter."""
+    track = PositionFilter(params)
+    cov = measurement_var * np.eye(2)
+    total = 0.0
+    for times, xy in walks:
+        track.reset()
+        last = None
+        for t, z in zip(times, xy):
+            if last is not None and 0 <= t - last <= params.timeout:
+                track.predict(t - last)
+                innovation_cov = track.cov[:2, :2] + cov
+                r = z - track.state[:2]
+                total -= 0.5 * (r @ np.linalg.solve(innovation_cov, r) +
+                                np.log(np.linalg.det(innovation_cov)))
+            else:
+                track.reset()
+            track.update(z, cov)
+            last = t
+    return total
+
+
+def fit_motion(walks, measurement_var=0.25,
+               accelerations=tuple(10.0 ** np.arange(-3, 1.01, 0.25))):
+    """
+    Fit ``speed_sd`` and ``acceleration_noise`` on walks with positions.
+
+    ``walks``: list of (times, xy (n, 2)) with true positions (known to
+    about ``measurement_var`` m^2). ``speed_sd`` is the root mean square
+    speed per axis between consecutive scans; ``acceleration_noise`` the
+    grid value under which the constant-velocity filter predicts the next
+    true position best (likelihood of its innovations). Consecutive scans
+    further apart than the timeout restart the filter, as in use. Return
+    (speed_sd, acceleration_noise).
+    """
+    walks = list(walks)
+    speeds = []
+    for times, xy in walks:
+        dt = np.diff(np.asarray(times, np.float64))
+        keep = dt > 0
+        speeds.append((np.diff(np.asarray(xy, np.float64), axis=0)[keep]
+                       / dt[keep, None]).ravel())
+    speeds = np.concatenate(speeds)
+    if not len(speeds):
+        raise ValueError('no consecutive scans with positions')
+    base = TrackingParams(speed_sd=float(np.sqrt(np.mean(speeds ** 2))))
+    scores = [_motion_log_likelihood(replace(base, acceleration_noise=a),
+                                     walks, measurement_var)
+              for a in accelerations]
+    return base.speed_sd, float(accelerations[int(np.argmax(scores))])
