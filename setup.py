@@ -32,12 +32,13 @@ setup(
         'console_scripts': [
             'train_model = wifi_place_recognition.cli.train_model:main',
             'evaluate_model = wifi_place_recognition.cli.evaluate_model:main',
-            'classifier_node = wifi_place_recognition.ros.classifier_node:main',
+            'classifier_node = '
+            'wifi_place_recognition.ros.executables:classifier_node',
             'replay_scans = wifi_place_recognition.cli.replay_scans:main',
             'wifi_scanner_node = '
-            'wifi_place_recognition.ros.wifi_scanner_node:main',
+            'wifi_place_recognition.ros.executables:wifi_scanner_node',
             'record_fingerprints = '
-            'wifi_place_recognition.ros.record_fingerprints:main',
+            'wifi_place_recognition.ros.executables:record_fingerprints',
         ],
     },
 )

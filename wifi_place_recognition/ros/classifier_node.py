@@ -5,11 +5,14 @@ Subscribes ``wifi/scan`` (``sensor_msgs/JointState``: ``name`` = AP id,
 ``position`` = RSSI dBm) and publishes one ``diagnostic_msgs/DiagnosticArray``
 per processed scan on ``~/place`` and ``/diagnostics``, plus a 1 Hz health
 status on ``/diagnostics``. Inference is a numpy forward pass: torch is
-never imported. Each scan is processed in the subscription callback; when
-more scans are already queued by then, only the newest is processed and the
-others are counted as dropped.
+never imported. Each scan is processed in the subscription callback. The
+subscription keeps one scan (KEEP_LAST, depth 1): a scan that arrives while
+another is processed replaces any still waiting, so the newest is processed
+next; the gaps in the publisher's sequence numbers count the replaced ones
+as dropped.
 """
 
+import copy
 import math
 import sys
 import time
@@ -24,14 +27,16 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
 from ..core.artifact import load_model, ModelFileError
-from .runner import run
+from .runner import names_the_node, run
 from ..core.recognizer import OK, PlaceRecognizer, WARN
 from ..core.resources import default_model_path
 from ..core.scan import REJECT_REASONS, ScanRejected
 
 LEVELS = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN}
 THROTTLE_S = 5.0
-MAX_DRAIN = 100_000
+# Sensor-data QoS that keeps only the newest scan waiting.
+SCAN_QOS = copy.copy(qos_profile_sensor_data)
+SCAN_QOS.depth = 1
 
 
 def _memory_mib():
@@ -65,6 +70,7 @@ class ClassifierNode(Node):
     baseline); the default is the recognizer's numpy one.
     """
 
+    @names_the_node
     def __init__(self, make_forward=None, **kwargs):
         super().__init__('classifier_node', **kwargs)
         model_path = self.declare_parameter(
@@ -102,6 +108,7 @@ class ClassifierNode(Node):
 
         self.status_name = f'{self.get_name()}: place'
         self.counts = Counter(received=0, answered=0, rejected=0, dropped=0)
+        self._last_sequence = None
         self.last_latency_ms = math.nan
         self.place_pub = self.create_publisher(
             DiagnosticArray, '~/place',
@@ -109,7 +116,7 @@ class ClassifierNode(Node):
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
         self._scan_sub = self.create_subscription(
-            JointState, 'wifi/scan', self._on_scan, qos_profile_sensor_data,
+            JointState, 'wifi/scan', self._on_scan, SCAN_QOS,
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.create_timer(1.0, self._publish_health)
         provenance = self.recognizer.model.provenance
@@ -136,32 +143,28 @@ class ClassifierNode(Node):
                 self.recognizer.mapper.max_aps = p.value
 
     # scans ----------------------------------------------------------------
-    def _on_scan(self, msg):
+    def _on_scan(self, msg, info):
         received_at = time.perf_counter()
+        self._count_replaced(info['publication_sequence_number'])
         self.counts['received'] += 1
-        newest = self._take_newest()
-        if newest is not None:
-            msg, received_at = newest, time.perf_counter()
         self._process(msg, received_at)
 
-    def _take_newest(self):
+    def _count_replaced(self, sequence):
         """
-        Take every scan already queued; return the newest, or None.
+        Count the scans the publisher sent since its last one as dropped.
 
-        Scans that arrived while the previous one was processed are waiting
-        in the subscription: all but the newest are counted as dropped. This
-        takes them the way rclpy's executor does (``handle.take_message``).
+        DDS numbers each publisher's messages; with the depth-1 queue a gap
+        is the scans that a newer one replaced (or, best-effort, lost on
+        the way). Counted while one publisher is matched: the numbers of two
+        publishers cannot be told apart.
         """
-        sub, newest = self._scan_sub, None
-        with sub.handle:
-            for _ in range(MAX_DRAIN):
-                taken = sub.handle.take_message(sub.msg_type, sub.raw)
-                if taken is None:
-                    break
-                self.counts['received'] += 1
-                self.counts['dropped'] += 1
-                newest = taken[0]
-        return newest
+        last, self._last_sequence = self._last_sequence, sequence
+        if last is None or sequence is None or sequence <= last + 1:
+            return          # the first scan, none missed, or a new publisher
+        if self._scan_sub.get_publisher_count() == 1:
+            missed = sequence - last - 1
+            self.counts['received'] += missed
+            self.counts['dropped'] += missed
 
     def _process(self, msg, received_at):
         status = DiagnosticStatus(name=self.status_name,

@@ -17,7 +17,7 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
-from .runner import run
+from .runner import names_the_node, run
 from ..data.recording import FingerprintLog, RecordingError
 
 PROGRESS_EVERY = 20
@@ -32,6 +32,7 @@ def _label(description):
 class RecordFingerprintsNode(Node):
     """Append labelled scans to a fingerprint CSV."""
 
+    @names_the_node
     def __init__(self):
         super().__init__('record_fingerprints')
         output = self.declare_parameter(

@@ -1,29 +1,80 @@
-"""The one place for a node's life cycle: start, spin, Jazzy-style shutdown."""
+"""
+The one place for a node's life cycle: start, spin, shutdown.
+
+rclpy's own signal handlers are not installed: SIGINT and SIGTERM only
+request a stop (see :mod:`.executables`), so a signal never shuts the
+context down under a running executor, and a repeated one is a no-op. The
+spin loop notices the request within ``POLL_S``, then destroys the node and
+shuts the context down itself.
+"""
+
+import contextlib
+import functools
+from pathlib import Path
+import sys
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from rclpy.exceptions import NameValidationException, ParameterException
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from .executables import catch_stop_signals, stop_requested
+
+POLL_S = 0.1
+
+
+def names_the_node(init):
+    """
+    Decorate a node's ``__init__``: its errors carry the node's logger.
+
+    So :func:`run` logs a start-up error under the node's (remapped) name.
+    """
+    @functools.wraps(init)
+    def checked(node, *args, **kwargs):
+        try:
+            init(node, *args, **kwargs)
+        except Exception as exc:
+            with contextlib.suppress(AttributeError):  # no node was made
+                exc.node_logger = node.get_logger()
+            raise
+    return checked
+
+
+def _cannot_start(exc):
+    logger = getattr(exc, 'node_logger', None) or \
+        rclpy.logging.get_logger(Path(sys.argv[0]).stem)
+    logger.error(f'cannot start: {exc}')
 
 
 def run(make_node, args=None, startup_errors=(ValueError,)):
     """
     Spin ``make_node()`` until SIGINT/SIGTERM; return the exit code.
 
-    A ``startup_errors`` exception while constructing the node (a bad model
-    file, a bad parameter) is logged as one line and gives exit code 1.
+    A bad parameter, or a ``startup_errors`` exception, while constructing
+    the node (a bad model file, a missing output) is logged as one line and
+    gives exit code 1.
     """
-    rclpy.init(args=args)
+    catch_stop_signals()
     try:
-        node = make_node()
-    except startup_errors as exc:
-        rclpy.logging.get_logger(getattr(make_node, '__name__', 'node')) \
-            .error(f'cannot start: {exc}')
-        rclpy.try_shutdown()
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RuntimeError as exc:     # malformed --ros-args
+        _cannot_start(exc)
         return 1
     try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        try:
+            node = make_node()
+        except (ParameterException, NameValidationException) + \
+                tuple(startup_errors) as exc:
+            _cannot_start(exc)
+            return 1
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        try:
+            while not stop_requested():
+                executor.spin_once(timeout_sec=POLL_S)
+        finally:
+            executor.shutdown()
+            node.destroy_node()
     finally:
-        node.destroy_node()
         rclpy.try_shutdown()
     return 0

@@ -17,7 +17,7 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
-from .runner import run
+from .runner import names_the_node, run
 from ..data.wifi_sources import scan, SOURCES, SourceError, wireless_interfaces
 
 THROTTLE_S = 30.0
@@ -26,6 +26,7 @@ THROTTLE_S = 30.0
 class WifiScannerNode(Node):
     """Publish scans of one wireless interface at a fixed period."""
 
+    @names_the_node
     def __init__(self):
         super().__init__('wifi_scanner_node')
         self.interface = self.declare_parameter(

@@ -1,0 +1,51 @@
+"""
+The nodes' executables, and the stop request that SIGINT/SIGTERM make.
+
+Each executable catches SIGINT and SIGTERM before it imports its node
+(rclpy and numpy take a few hundred milliseconds), so a signal at any
+moment of start-up, or a repeated one during shutdown, only requests the
+stop that :func:`.runner.run` carries out. This module imports nothing
+heavy for that reason.
+"""
+
+import importlib
+import signal
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_requests = []
+
+
+def _request_stop(signum, frame):
+    # Lock-free: the handler may interrupt any code of the main thread.
+    _requests.append(signum)
+
+
+def catch_stop_signals():
+    """From now on SIGINT/SIGTERM (any number of them) request a stop."""
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, _request_stop)
+
+
+def stop_requested():
+    """Return True once a stop signal arrived."""
+    return bool(_requests)
+
+
+def _main(module):
+    catch_stop_signals()
+    return importlib.import_module(f'{__package__}.{module}').main()
+
+
+def classifier_node():
+    """Run ``classifier_node``; return its exit code."""
+    return _main('classifier_node')
+
+
+def wifi_scanner_node():
+    """Run ``wifi_scanner_node``; return its exit code."""
+    return _main('wifi_scanner_node')
+
+
+def record_fingerprints():
+    """Run ``record_fingerprints``; return its exit code."""
+    return _main('record_fingerprints')
