@@ -1,6 +1,8 @@
 """The model file: round trip, and refusal of every kind of bad file."""
 
 import json
+import os
+import stat
 
 import numpy as np
 import pytest
@@ -21,7 +23,19 @@ def test_round_trip_keeps_predictions(synthetic, tmp_path):
                                   copy.predict_proba(x))
     assert copy.ap_ids == model.ap_ids
     assert copy.provenance['config']['sae_layers'] == [32, 16]
-    assert (tmp_path / 'copy.npz').stat().st_mode & 0o044  # not 0600
+
+
+@pytest.mark.parametrize('umask', [0o022, 0o027, 0o077, 0o002], ids=oct)
+def test_a_saved_file_has_the_usual_permissions(tmp_path, umask):
+    model = load_model(default_model_path())
+    previous = os.umask(umask)
+    try:
+        save_model(model, tmp_path / 'm.npz')
+    finally:
+        os.umask(previous)
+    # like open(): 0o666 less the umask, bit for bit (not mkstemp's 0o600)
+    mode = stat.S_IMODE((tmp_path / 'm.npz').stat().st_mode)
+    assert oct(mode) == oct(0o666 & ~umask)
 
 
 def test_shipped_model_loads_with_its_provenance():
