@@ -26,10 +26,11 @@ def test_generic_csv_with_mac_columns(tmp_path):
 
 
 def test_values_above_zero_are_clipped_and_counted():
-    fp = parse(f'{HEADER}\n-50,5,0,0,1\n-50,100,1,0,1\n')
+    fp = parse(f'{HEADER}\n-50,5,0,0,1\n-50,100,1,0,1\n-50,-70,1,0,1\n')
     assert fp.rssi[0, 1] == 0.0
     assert fp.clipped == 1
     assert np.isnan(fp.rssi[1, 1])
+    assert fp.notes == []
 
 
 def test_rows_without_any_ap_are_kept_and_flagged():
@@ -44,11 +45,18 @@ def test_rows_without_any_ap_are_kept_and_flagged():
     ('WAP001;WAP002;FLOOR;BUILDINGID\n-50;-60;1;0\n',
      'single column: is the file comma-separated?'),
     (f'{HEADER}\n-50,-60,0,0,1\n-50,0,1\n', 'row 3 has 3 fields'),
-    (f'{HEADER}\n-50,abc,0,0,1\n', "row 2, column WAP002: value 'abc'"),
-    (f'{HEADER}\n-50,nan,0,0,1\n', 'row 2, column WAP002: value nan'),
+    (f'{HEADER}\n-50,-60,0,0,1\n-50,abc,0,0,1\n',
+     "row 3, column WAP002: value 'abc'"),
+    (f'{HEADER}\n-50,-60,0,0,1\n-50,nan,0,0,1\n',
+     'row 3, column WAP002: value nan'),
     (f'{HEADER}\n-50,-60,0,0,1\n-50,-400,0,0,1\n',
      'row 3, column WAP002: RSSI -400 dBm is outside'),
-    (f'{HEADER}\n-50,60,0,0,1\n', 'row 2, column WAP002: RSSI 60'),
+    (f'{HEADER}\n-50,-60,0,0,1\n-50,60,0,0,1\n',
+     'row 3, column WAP002: RSSI 60'),
+    (f'{HEADER}\n-50,-60,0,0,1\n\n-50,-60,x,0,1\n',
+     "row 4, column FLOOR: value 'x' is not a number"),
+    (f'{HEADER}\n-50,-60,0,0,1\n\n-50,-60,0,0,1\n-50,-60,0,nan,1\n',
+     'row 5, column BUILDINGID: value nan is not a finite'),
     (f'{HEADER}\n-50,-60,1.5,0,1\n', 'row 2, column FLOOR: value 1.5'),
     (f'{HEADER}\n-50,-60,0,-1,1\n', 'row 2, column BUILDINGID: value -1'),
     ('WAP001,WAP001,FLOOR,BUILDINGID\n-50,-60,1,0\n',
@@ -101,9 +109,27 @@ def test_download_verifies_the_training_member(tmp_path):
         download_uci(tmp_path / 'c2', (tmp_path / 'none.zip').as_uri())
 
 
+def _digest(*arrays):
+    return hashlib.sha256(b''.join(a.tobytes() for a in arrays)).hexdigest()
+
+
 def test_real_training_file():
+    """UJIIndoorLoc reads as it always did: the shipped model depends on it."""
     fp = read_fingerprints(dataset_file('trainingData.csv'))
-    assert fp.rssi.shape == (19937, 520)
+    assert fp.rssi.shape == (19937, 520) and fp.rssi.dtype == np.float32
     assert fp.sha256.startswith('45ca0128')
     assert int(fp.empty_rows.sum()) == 76
     assert len(set(zip(fp.building, fp.floor))) == 13
+    # digests of the arrays the reader before multi-format reading returned
+    assert _digest(np.nan_to_num(fp.rssi, nan=100)).startswith(
+        'da81c92cca1cbc3b')
+    assert _digest(fp.building, fp.floor).startswith('397dada8b8cf45cf')
+    assert fp.notes == [] and fp.walk is None
+    assert fp.position_columns == ('LONGITUDE', 'LATITUDE')
+    assert fp.position.dtype == np.float64
+    assert fp.position[0].tolist() == [-7541.2642999999225, 4864920.7782000005]
+    assert fp.meta['PHONEID'].dtype == np.int64
+    assert fp.meta['TIMESTAMP'].dtype == np.float64
+    assert fp.meta['TIMESTAMP'][0] == 1371713733
+    assert 'LONGITUDE' not in fp.meta
+    assert '18.0 detected per scan on average' in fp.summary()

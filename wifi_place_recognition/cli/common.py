@@ -6,7 +6,8 @@ import sys
 from pathlib import Path
 
 from ..core.artifact import ModelFileError
-from ..data.fingerprints import DataError, download_uci
+from ..data.fingerprints import (DataError, download_uci, read_fingerprints,
+                                 ReaderOptions, SMALL_CLASS_POLICIES)
 
 DEFAULT_CACHE = Path(os.environ.get('XDG_CACHE_HOME', Path.home() / '.cache')
                      ) / 'wifi_place_recognition'
@@ -22,13 +23,89 @@ def add_download_arguments(parser):
                         help=f'download cache (default: {DEFAULT_CACHE})')
 
 
-def data_path(given, args, what):
-    """Return ``given``, else the downloaded zip, else exit with a message."""
-    if given:
-        return given
-    if args.download:
-        return str(download_uci(args.cache_dir))
-    raise DataError(f'no {what} given: pass a CSV path or --download')
+def _names(text):
+    return tuple(n.strip() for n in text.split(',') if n.strip())
+
+
+def _column(text):
+    return None if text.lower() == 'none' else text
+
+
+def _pair(text):
+    return None if text.lower() == 'none' else _names(text)
+
+
+def add_data_arguments(parser, training=False):
+    """Add the options that say how to read fingerprint files."""
+    d = ReaderOptions()
+    g = parser.add_argument_group(
+        'reading fingerprint files (defaults read UJIIndoorLoc and '
+        'record_fingerprints files; see the README, "Fingerprint CSVs")')
+    g.add_argument('--ap-columns', type=_names, default=(),
+                   metavar='NAMES',
+                   help='AP columns: comma-separated names or patterns '
+                        '(WAP*); others are left out. Default: every '
+                        'column whose values look like RSSI')
+    g.add_argument('--meta-columns', type=_names, default=(),
+                   metavar='NAMES',
+                   help='columns that are not APs (names or patterns), '
+                        'kept as metadata')
+    g.add_argument('--building-column', type=_column,
+                   default=d.building_column, metavar='NAME',
+                   help='default: %(default)s; none: one building, '
+                        'building 0 for every scan')
+    g.add_argument('--floor-column', default=d.floor_column, metavar='NAME',
+                   help='default: %(default)s')
+    g.add_argument('--device-column', default=d.device_column,
+                   metavar='NAME',
+                   help='device ids, numbers or text (default: '
+                        '%(default)s, when present)')
+    g.add_argument('--time-column', default=d.time_column, metavar='NAME',
+                   help='seconds or ISO dates (default: %(default)s, when '
+                        'present)')
+    g.add_argument('--position-columns', type=_pair, default=(),
+                   metavar='X,Y',
+                   help='coordinates in metres (default: LONGITUDE,LATITUDE '
+                        'or X,Y when present; none: ignore them)')
+    g.add_argument('--not-detected-marker', type=float, default=None,
+                   metavar='VALUE',
+                   help='the value that marks an AP as not detected IN THE '
+                        'FILES (default: 100, and a value that fills most '
+                        'cells at the bottom of the range is taken too, '
+                        'with a note); --not-detected is what the model '
+                        'uses instead')
+    if training:
+        g.add_argument('--small-classes', choices=SMALL_CLASS_POLICIES,
+                       default='warn',
+                       help='classes far smaller than the rest (a typo in '
+                            'a label?): warn and keep them (default), drop '
+                            'them, or keep them as intended')
+
+
+def read_data(given, args, what, role='train', small_classes=None):
+    """
+    Read the data given on the command line, print how it was read.
+
+    ``given``: the paths (or None: the downloaded zip with --download).
+    Notes (columns left out, a detected marker ...) go to stderr always.
+    """
+    if not given:
+        if not args.download:
+            raise DataError(f'no {what} given: pass a CSV path, a folder or '
+                            f'--download')
+        given = [download_uci(args.cache_dir)]
+    options = ReaderOptions(
+        ap_columns=args.ap_columns, meta_columns=args.meta_columns,
+        building_column=args.building_column,
+        floor_column=args.floor_column, device_column=args.device_column,
+        time_column=args.time_column,
+        position_columns=args.position_columns,
+        not_detected_marker=args.not_detected_marker,
+        small_classes=small_classes)
+    fp = read_fingerprints(given, role, options)
+    for note in fp.notes:
+        print(f'note: {note}', file=sys.stderr, flush=True)
+    return fp
 
 
 def main_wrapper(main):

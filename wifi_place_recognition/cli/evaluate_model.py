@@ -8,10 +8,9 @@ from pathlib import Path
 from ..core.artifact import load_model
 from ..core.evaluation import evaluate
 from ..core.resources import default_model_path
-from ..data.fingerprints import read_fingerprints
 from ..data.predictions import write_predictions
-from .common import (add_download_arguments, data_path, main_wrapper,
-                     print_report)
+from .common import (add_data_arguments, add_download_arguments, main_wrapper,
+                     print_report, read_data)
 
 
 @main_wrapper
@@ -24,15 +23,18 @@ def main(argv=None):
     p.add_argument('--model', type=Path, default=None,
                    help=f'model file (default: the shipped '
                         f'{default_model_path().name})')
-    p.add_argument('--data', help='labelled CSV, or the UCI zip')
+    p.add_argument('--data', nargs='+', metavar='PATH',
+                   help='labelled CSV(s) or folder(s) of CSVs, or the UCI '
+                        'zip')
     p.add_argument('--json', action='store_true',
                    help='print one JSON object instead of the report')
     p.add_argument('--predictions', metavar='OUT.csv',
                    help='write one row per input row with the prediction')
     add_download_arguments(p)
+    add_data_arguments(p)
     args = p.parse_args(argv)
     model = load_model(args.model or default_model_path())
-    fp = read_fingerprints(data_path(args.data, args, 'data'), role='test')
+    fp = read_data(args.data, args, 'data', role='test')
     result = evaluate(model, fp)
     predictions = result.pop('predictions')
     if args.predictions:

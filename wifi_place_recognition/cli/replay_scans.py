@@ -6,10 +6,10 @@ import sys
 import rclpy
 from rclpy.executors import ExternalShutdownException
 
-from ..data.fingerprints import read_fingerprints
 from ..data.predictions import write_predictions
 from ..ros.replayer import replay, summarise
-from .common import add_download_arguments, data_path, main_wrapper
+from .common import (add_data_arguments, add_download_arguments, main_wrapper,
+                     read_data)
 
 
 @main_wrapper
@@ -19,7 +19,9 @@ def main(argv=None):
         prog='replay_scans',
         description='Publish the rows of a UJIIndoorLoc-format CSV as WiFi '
                     'scans and report how the classifier node answered.')
-    p.add_argument('--data', help='labelled CSV, or the UCI zip')
+    p.add_argument('--data', nargs='+', metavar='PATH',
+                   help='labelled CSV(s) or folder(s) of CSVs, or the UCI '
+                        'zip')
     p.add_argument('--rate', type=float, default=0.0,
                    help='scans per second; 0 (default): send each scan '
                         'when the previous one is answered')
@@ -40,8 +42,9 @@ def main(argv=None):
     p.add_argument('--predictions', metavar='OUT.csv',
                    help='write the answers in evaluate_model\'s format')
     add_download_arguments(p)
+    add_data_arguments(p)
     args, ros_args = p.parse_known_args(argv)
-    fp = read_fingerprints(data_path(args.data, args, 'data'), role='test')
+    fp = read_data(args.data, args, 'data', role='test')
     rclpy.init(args=ros_args)
     node = rclpy.create_node('scan_replayer')
     try:

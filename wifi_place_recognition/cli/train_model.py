@@ -6,11 +6,10 @@ from dataclasses import fields
 
 from ..core.artifact import save_model
 from ..core.evaluation import evaluate
-from ..data.fingerprints import read_fingerprints
 from ..training.config import TrainConfig
 from ..training.trainer import train
-from .common import (add_download_arguments, data_path, main_wrapper,
-                     print_report)
+from .common import (add_data_arguments, add_download_arguments, main_wrapper,
+                     print_report, read_data)
 
 
 def _layers(text):
@@ -23,14 +22,17 @@ def build_parser():
         prog='train_model',
         description='Train the SAE + classifier on a fingerprint CSV and '
                     'write the model artifact that classifier_node loads.')
-    p.add_argument('--data', help='training CSV (UJIIndoorLoc or generic '
-                                  'format), or the UCI zip')
+    p.add_argument('--data', nargs='+', metavar='PATH',
+                   help='training CSV(s) or folder(s) of CSVs (one walk '
+                        'each), or the UCI zip')
     p.add_argument('-o', '--output', required=True,
                    help='model file to write (atomically)')
-    p.add_argument('--test', help='also evaluate on this CSV at the end')
+    p.add_argument('--test', nargs='+', metavar='PATH',
+                   help='also evaluate on these CSV(s) or folder at the end')
     p.add_argument('--quiet', action='store_true',
                    help='no per-epoch progress lines')
     add_download_arguments(p)
+    add_data_arguments(p, training=True)
     defaults = TrainConfig()
     g = p.add_argument_group(
         'model and training (defaults: the paper\'s network plus what '
@@ -57,19 +59,17 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     config = TrainConfig(**{f.name: getattr(args, f.name)
                             for f in fields(TrainConfig)})
-    train_fp = read_fingerprints(data_path(args.data, args, 'training data'),
-                                 role='train')
+    train_fp = read_data(args.data, args, 'training data',
+                         small_classes=args.small_classes)
     test_fp = None
     if args.test or (args.download and not args.data):
-        test_fp = read_fingerprints(data_path(args.test, args, 'test data'),
-                                    role='test')
+        test_fp = read_data(args.test, args, 'test data', role='test')
 
     def log(line):
         if not args.quiet:
             print(line, file=sys.stderr, flush=True)
 
-    log(f'{train_fp.source}: {len(train_fp)} scans, {len(train_fp.ap_ids)} '
-        f'APs, {train_fp.clipped} RSSI cells clipped to 0 dBm')
+    print(train_fp.summary(), file=sys.stderr, flush=True)
     model, _, report = train(train_fp, config, log)
     save_model(model, args.output)
     print(f'wrote {args.output}: {len(model.ap_ids)} APs, '

@@ -1,24 +1,19 @@
 """Score a model on labelled fingerprints: the offline twin of the node."""
 
-import numpy as np
-
 from .metrics import accuracies, confusion
 from .scan import ScanMapper
 
 
 def align(model, fp):
     """
-    Return ``fp.rssi`` with columns in the model's AP order.
+    Return ``fp.rssi`` on the model's AP vector, mapped as the node does.
 
     APs the model knows but the file lacks are not detected; APs of the file
-    the model does not know are ignored.
+    the model does not know are ignored; identifiers match as in the node
+    (case and separators ignored) and an AP read twice keeps its strongest
+    reading.
     """
-    if tuple(fp.ap_ids) == tuple(model.ap_ids):
-        return fp.rssi
-    cols = ScanMapper(model.ap_ids).columns(fp.ap_ids)
-    out = np.full((len(fp), len(model.ap_ids)), np.nan, np.float32)
-    out[:, cols[cols >= 0]] = fp.rssi[:, cols >= 0]
-    return out
+    return ScanMapper(model.ap_ids).map_rows(fp.ap_ids, fp.rssi)
 
 
 def evaluate(model, fp):

@@ -68,6 +68,24 @@ class ScanMapper:
         return np.fromiter(map(self._column, names), dtype=np.int64,
                            count=len(names))
 
+    def place(self, cols, rssi):
+        """
+        Return readings on the AP vector: ``rssi[..., i]`` to ``cols[i]``.
+
+        ``rssi`` is one scan or rows of scans (NaN = not detected). Unknown
+        APs (column -1) are left out; an AP read twice keeps its strongest
+        reading.
+        """
+        known = cols >= 0
+        rssi = np.asarray(rssi, np.float32)[..., known]
+        vector = np.full(rssi.shape[:-1] + (self.size,), np.nan, np.float32)
+        np.fmax.at(vector.T, cols[known], rssi.T)
+        return vector
+
+    def map_rows(self, names, rssi):
+        """Return rows of scans over AP ``names`` on the AP vector."""
+        return self.place(self.columns(names), rssi)
+
     def map(self, names, rssi):
         """
         Return a :class:`MappedScan`; raise :class:`ScanRejected`.
@@ -101,6 +119,5 @@ class ScanMapper:
         if not n_known:
             raise ScanRejected('no_known_ap', f'none of the {len(names)} APs '
                                f'is known to the model')
-        vector = np.full(self.size, np.nan, np.float32)
-        np.fmax.at(vector, cols[known], values[known].astype(np.float32))
-        return MappedScan(vector, n_known, int((~known).sum()), clipped)
+        return MappedScan(self.place(cols, values), n_known,
+                          int((~known).sum()), clipped)

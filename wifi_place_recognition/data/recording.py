@@ -14,10 +14,12 @@ import math
 import os
 from pathlib import Path
 
+import numpy as np
+
 from ..core.atomic import atomic_write
-from .fingerprints import NOT_DETECTED_MARKER
-from ..core.rssi import CLIP_LIMIT_DBM, MAX_DBM, MIN_DBM
+from ..core.rssi import clip_plausible, plausible
 from ..core.scan import normalize_ap_id
+from .fingerprints import NOT_DETECTED_MARKER
 
 LEADING = ('BUILDINGID', 'FLOOR', 'TIMESTAMP')
 MISSING = f'{NOT_DETECTED_MARKER:g}'
@@ -67,16 +69,15 @@ class FingerprintLog:
         strongest reading. A scan left with no reading is not recorded.
         """
         best, skipped = {}, 0
-        for name, value in zip(names, rssi):
-            if not (math.isfinite(value) and
-                    MIN_DBM <= value <= CLIP_LIMIT_DBM):
-                skipped += 1
-                continue
+        rssi = np.array(rssi, dtype=np.float64)
+        ok = plausible(rssi)    # the node would reject the whole scan
+        rssi[ok] = clip_plausible(rssi[ok])[0]
+        for name, value, good in zip(names, rssi.tolist(), ok):
             ap = normalize_ap_id(name)
-            if not ap or ',' in ap or '\n' in ap:
+            if not (good and ap) or ',' in ap or '\n' in ap:
                 skipped += 1
                 continue
-            best[ap] = max(best.get(ap, -math.inf), min(value, MAX_DBM))
+            best[ap] = max(best.get(ap, -math.inf), value)
         if not best:
             return False, skipped
         new = [ap for ap in best if ap not in self.index]
