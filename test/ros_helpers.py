@@ -4,6 +4,7 @@ import contextlib
 import os
 import signal
 import subprocess
+import time
 
 from conftest import python_module, wait_until
 from diagnostic_msgs.msg import DiagnosticArray
@@ -41,12 +42,23 @@ class NodeProcess:
 
 
 class Client:
-    """The test's side: publishes scans, collects answers by stamp."""
+    """
+    The test's side: publishes scans, collects answers by stamp.
+
+    It counts what it sent (``sent``) and every answer message it got
+    (``places``), and keeps the client-measured round trip of each scan
+    sent with :meth:`send` (``round_trip_ms``, by stamp).
+    """
 
     def __init__(self, node, node_name='classifier_node'):
         self.node = node
+        self.node_name = node_name
         self.pub = node.create_publisher(JointState, 'wifi/scan', RELIABLE)
         self.answers = {}
+        self.arrived = {}
+        self.round_trip_ms = {}
+        self.sent = 0
+        self.places = 0
         self.health = []
         self.subs = [
             node.create_subscription(DiagnosticArray, f'/{node_name}/place',
@@ -58,12 +70,15 @@ class Client:
         self.seq = 0
 
     def _on_place(self, msg):
+        self.places += 1
+        self.arrived.setdefault(msg.header.stamp.sec, time.monotonic())
         self.answers[msg.header.stamp.sec] = msg
 
     def _on_diag(self, msg):
-        self.health += [s for s in msg.status if s.name.endswith('health')]
+        self.health += [s for s in msg.status
+                        if s.name == f'{self.node_name}: health']
 
-    def wait_ready(self, proc, probe, timeout=20):
+    def wait_ready(self, proc, probe, timeout=60):
         """
         Wait for the node, then send ``probe`` scans until one is answered.
 
@@ -74,12 +89,29 @@ class Client:
                           self.subs[0].get_publisher_count() > 0 and
                           self.params.service_is_ready(), timeout,
                           self.node), proc.stop()[1]
-        for _ in range(50):
-            try:
-                return self.send(*probe, timeout=0.2)
-            except AssertionError:
-                pass
-        raise AssertionError(proc.stop()[1])
+        status = self.resend_until_answered(self.scan(*probe), timeout)
+        assert status is not None, proc.stop()[1]
+        return status
+
+    def resend_until_answered(self, msg, timeout, every=0.5):
+        """
+        Publish ``msg`` every ``every`` s until answered; return the status.
+
+        For best-effort delivery (the node's scan QoS), which may lose a scan
+        after discovery or in a burst. Returns None after ``timeout`` s.
+        """
+        deadline = time.monotonic() + timeout
+        stamp = msg.header.stamp.sec
+        while time.monotonic() < deadline:
+            self.publish(msg)
+            if wait_until(lambda: stamp in self.answers, every, self.node):
+                return self.answers[stamp].status[0]
+        return None
+
+    def publish(self, msg):
+        """Publish one scan message and count it in ``sent``."""
+        self.pub.publish(msg)
+        self.sent += 1
 
     def scan(self, names, rssi, frame_id='wlan0'):
         """Return the next scan message, stamped with a new sequence number."""
@@ -89,24 +121,47 @@ class Client:
         msg.header.frame_id = frame_id
         return msg
 
-    def send(self, names, rssi, frame_id='wlan0', timeout=5.0):
+    def send(self, names, rssi, frame_id='wlan0', timeout=30.0):
         """Publish one scan; return the node's DiagnosticStatus for it."""
-        self.pub.publish(self.scan(names, rssi, frame_id))
+        msg = self.scan(names, rssi, frame_id)
         seq = self.seq
-        assert wait_until(lambda: seq in self.answers, timeout, self.node)
+        sent_at = time.monotonic()
+        self.publish(msg)
+        assert wait_until(lambda: seq in self.answers, timeout, self.node), \
+            f'scan {seq} was not answered within {timeout} s'
+        self.round_trip_ms[seq] = (self.arrived[seq] - sent_at) * 1e3
         return self.answers[seq].status[0]
+
+    def counts(self, values):
+        """
+        Return the scan counters of a health status, checked against this side.
+
+        The node cannot receive more than was sent, every received scan is
+        answered, rejected or dropped, and every answer this side got was
+        counted as answered or rejected.
+        """
+        counts = {k: int(values[f'scans_{k}']) for k in
+                  ('received', 'answered', 'rejected', 'dropped')}
+        assert counts['received'] <= self.sent, (counts, self.sent)
+        assert counts['received'] == (counts['answered'] + counts['rejected']
+                                      + counts['dropped']), counts
+        assert counts['answered'] + counts['rejected'] >= self.places, \
+            (counts, self.places)
+        return counts
 
     def set_param(self, name, value):
         """Set one parameter over the service; return SetParametersResult."""
         kind = {float: ParameterType.PARAMETER_DOUBLE,
                 int: ParameterType.PARAMETER_INTEGER,
-                str: ParameterType.PARAMETER_STRING}[type(value)]
+                str: ParameterType.PARAMETER_STRING,
+                bool: ParameterType.PARAMETER_BOOL}[type(value)]
         field = {float: 'double_value', int: 'integer_value',
-                 str: 'string_value'}[type(value)]
+                 str: 'string_value', bool: 'bool_value'}[type(value)]
         pv = ParameterValue(type=kind, **{field: value})
         future = self.params.call_async(SetParameters.Request(
             parameters=[Parameter(name=name, value=pv)]))
-        rclpy.spin_until_future_complete(self.node, future, timeout_sec=5)
+        rclpy.spin_until_future_complete(self.node, future, timeout_sec=30)
+        assert future.done(), f'no reply to setting {name} within 30 s'
         return future.result().results[0]
 
     def close(self):

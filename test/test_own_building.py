@@ -3,6 +3,7 @@
 import os
 from pathlib import Path
 import signal
+import time
 
 from conftest import FAST, python_module, run, wait_until
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -187,37 +188,90 @@ class FloorSimulator:
                  if s])
 
 
+class RecorderProgress:
+    """record_fingerprints' 1 Hz progress statuses on /diagnostics."""
+
+    def __init__(self, ros, name='record_fingerprints'):
+        self.ros, self.name, self.statuses = ros, name, []
+        self.sub = ros.create_subscription(
+            DiagnosticArray, '/diagnostics', self._on_diagnostics, RELIABLE)
+
+    def _on_diagnostics(self, msg):
+        self.statuses += [s for s in msg.status
+                          if s.name == f'{self.name}: progress']
+
+    def recorded(self, building, floor):
+        """Return the scans of (building, floor) in the file, as last reported."""
+        values = status_values(self.statuses[-1]) if self.statuses else {}
+        return int(values.get(f'scans/B{building}F{floor}', 0))
+
+    def next(self, timeout=30):
+        """Wait for the next progress status."""
+        seen = len(self.statuses)
+        assert wait_until(lambda: len(self.statuses) > seen, timeout,
+                          self.ros), f'no progress status in {timeout} s'
+
+    def record(self, client, scan, building, floor, at_least, timeout=180):
+        """
+        Publish ``scan()`` results until the file holds ``at_least`` of them.
+
+        Then wait until the count stops moving (no scan still on its way, so
+        changing the labels next cannot relabel one); return the count.
+        """
+        deadline = time.monotonic() + timeout
+        while self.recorded(building, floor) < at_least:
+            assert time.monotonic() < deadline, (
+                f'only {self.recorded(building, floor)} of {at_least} scans '
+                f'recorded in {timeout} s')
+            for _ in range(10):
+                client.publish(client.scan(*scan()))
+                wait_until(lambda: False, 0.01, self.ros)
+            self.next()
+        count = None
+        while count != self.recorded(building, floor):
+            count = self.recorded(building, floor)
+            self.next()
+        return count
+
+    def close(self):
+        """Unsubscribe."""
+        self.ros.destroy_subscription(self.sub)
+
+
 def test_the_whole_loop_in_a_simulated_building(ros, tmp_path):
     sim = FloorSimulator()
     csv_path = tmp_path / 'building.csv'
+    progress = RecorderProgress(ros)
     recorder = NodeProcess(tmp_path, python_module(
         'ros.record_fingerprints', '--ros-args', '-p', f'output:={csv_path}'),
         'record_fingerprints')
     client = Client(ros, 'record_fingerprints')
+    per_floor = {}
     try:
         assert wait_until(lambda: client.pub.get_subscription_count() and
-                          client.params.service_is_ready(), 20, ros)
+                          client.params.service_is_ready(), 60, ros), \
+            recorder.stop()[1]
         for k, (building, floor) in enumerate(sim.floors):
             assert client.set_param('building', building).successful
             assert client.set_param('floor', floor).successful
-            for _ in range(60):          # the robot drives around the floor
-                client.pub.publish(client.scan(*sim.scan(k)))
-                wait_until(lambda: False, 0.01, ros)
-        wait_until(lambda: False, 1.0, ros)
+            # The robot drives around the floor until 50 scans are recorded.
+            per_floor[k] = progress.record(client, lambda: sim.scan(k),
+                                           building, floor, 50)
     finally:
+        progress.close()
         client.close()
         code, log = recorder.stop()
     assert code == 0 and 'Traceback' not in log, log
     recorded = read_fingerprints(csv_path)
-    per_floor = {f: int(((recorded.building == b) & (recorded.floor == f_))
-                        .sum()) for f, (b, f_) in enumerate(sim.floors)}
-    assert all(n >= 40 for n in per_floor.values()), per_floor
+    assert per_floor == {
+        k: int(((recorded.building == b) & (recorded.floor == f)).sum())
+        for k, (b, f) in enumerate(sim.floors)}, per_floor
+    assert len(recorded) == sum(per_floor.values())
 
     model = tmp_path / 'building.npz'
     # A few hundred scans: many more epochs than the UJIIndoorLoc default.
     trained = run(python_module('cli.train_model', '--data', csv_path, '-o',
-                                model, *FAST, '--epochs', '150',
-                                '--patience', '50'))
+                                model, *FAST, '--epochs', '150'))
     assert trained.returncode == 0, trained.stderr
 
     node = NodeProcess(tmp_path, python_module(
@@ -242,39 +296,26 @@ def test_the_whole_loop_in_a_simulated_building(ros, tmp_path):
 def test_killed_recorder_continues_the_same_file(ros, tmp_path):
     csv_path = tmp_path / 'rec.csv'
     sim = FloorSimulator(seed=1)
-    progress = []
-    sub = ros.create_subscription(
-        DiagnosticArray, '/diagnostics',
-        lambda m: progress.extend(s for s in m.status
-                                  if s.name.endswith(': progress')),
-        RELIABLE)
-    totals = []
+    counted, totals = [], []
     for attempt in range(2):
-        progress.clear()
+        progress = RecorderProgress(ros)
         recorder = NodeProcess(tmp_path, python_module(
             'ros.record_fingerprints', '--ros-args', '-p', f'output:={csv_path}',
             '-p', 'building:=0', '-p', 'floor:=1'), 'record_fingerprints')
         client = Client(ros, 'record_fingerprints')
         before = totals[-1] if totals else 0
-
-        def recorded():
-            values = status_values(progress[-1]) if progress else {}
-            return int(values.get('scans/B0F1', 0))
-        # The killed process's reader lingers in discovery, and the new
-        # reader may not accept our first scans: probe until one is recorded.
-        for _ in range(100):
-            client.pub.publish(client.scan(*sim.scan(1)))
-            if wait_until(lambda: recorded() > before, 0.3, ros):
-                break
-        assert recorded() > before, recorder.stop()[1]
-        for _ in range(30):
-            client.pub.publish(client.scan(*sim.scan(1)))
-            wait_until(lambda: False, 0.02, ros)
-        wait_until(lambda: False, 0.5, ros)
-        recorder.proc.send_signal(signal.SIGKILL)
-        recorder.proc.wait()
-        client.close()
+        try:
+            # The killed process's reader lingers in discovery, and the new
+            # reader may not accept our first scans: publish until recorded.
+            counted.append(progress.record(client, lambda: sim.scan(1), 0, 1,
+                                           before + 25))
+        finally:
+            recorder.proc.send_signal(signal.SIGKILL)
+            recorder.proc.wait()
+            progress.close()
+            client.close()
         totals.append(len(read_fingerprints(csv_path)))
-    ros.destroy_subscription(sub)
-    assert 25 <= totals[0] and totals[1] - totals[0] >= 25, totals
+    # Every scan the recorder reported recorded is in the file after a kill.
+    assert totals == counted and totals[1] - totals[0] >= 25, (totals,
+                                                               counted)
     assert FingerprintLog(csv_path).counts[(0, 1)] == totals[1]
