@@ -302,16 +302,19 @@ class _Table:
                                  options.device_column != DEVICE)
         self.time = self._find(options.time_column, 'time',
                                options.time_column != TIME)
-        self.position = None
+        self.position, unused = None, []
         if options.position_columns:
             self.position = tuple(self._find(c, 'position', True)
                                   for c in options.position_columns)
-        elif options.position_columns is not None:
-            for pair in POSITION_PAIRS:
-                cols = tuple(self._find(c, 'position', False) for c in pair)
-                if None not in cols:
-                    self.position = cols
-                    break
+        for pair in POSITION_PAIRS if not options.position_columns else ():
+            cols = tuple(self._find(c, 'position', False) for c in pair)
+            if None in cols:
+                continue
+            if options.position_columns is None:
+                unused += cols          # coordinates ignored: metadata
+            else:
+                self.position = cols
+                break
         roles = {}
         for role, j in [('building', self.building), ('floor', self.floor),
                         ('device', self.device), ('time', self.time)] + \
@@ -326,9 +329,8 @@ class _Table:
         def matching(patterns):
             return [j for j in rest
                     if any(fnmatchcase(header[j], p) for p in patterns)]
-        self.meta = matching(options.meta_columns) + \
-            [j for j in rest if header[j] in META_COLUMNS]
-        self.meta = sorted(set(self.meta))
+        self.meta = sorted(set(matching(options.meta_columns)) | {
+            j for j in rest if header[j] in META_COLUMNS or j in unused})
         rest = [j for j in rest if j not in self.meta]
         self.matched = {p for p in options.meta_columns + options.ap_columns
                         if any(fnmatchcase(header[j], p)
@@ -339,8 +341,9 @@ class _Table:
         else:
             self.candidates, self.unnamed = rest, []
         if not self.candidates:
-            raise DataError(f'{name}: no AP columns (every column is '
-                            f'metadata)')
+            raise DataError(f'{name}: no AP columns (' + (
+                f'none matches {", ".join(map(repr, options.ap_columns))})'
+                if options.ap_columns else 'every column is metadata)'))
 
     def fail(self, row, j, problem):
         """Raise a :class:`DataError` naming row ``row`` of column ``j``."""
@@ -391,7 +394,7 @@ class _Table:
 
     def times(self, j):
         """Return times in seconds: numbers, or ISO dates (UTC if naive)."""
-        if self._numeric_text(j):
+        if self._numeric_text(j) or _is_number(self.texts[j][0]):
             return self.numeric(j)
         out = np.empty(len(self.lines))
         for r, cell in enumerate(self.texts[j]):
