@@ -114,7 +114,7 @@ def _digest(*arrays):
 
 
 def test_real_training_file():
-    """UJIIndoorLoc reads as it always did: the shipped model depends on it."""
+    """Read UJIIndoorLoc as before: the shipped model depends on it."""
     fp = read_fingerprints(dataset_file('trainingData.csv'))
     assert fp.rssi.shape == (19937, 520) and fp.rssi.dtype == np.float32
     assert fp.sha256.startswith('45ca0128')
