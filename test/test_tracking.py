@@ -74,7 +74,7 @@ def test_follows_a_real_floor_change_within_two_scans():
 
 
 def test_long_gap_restarts_and_backwards_time_restarts():
-    tracker = PlaceTracker(CLASSES, TrackingParams(timeout=60.0))
+    tracker = PlaceTracker(CLASSES, timeout=60.0)
     for i in range(20):
         tracker.update(5.0 * i, scan(0, 0.99))
     track = tracker.update(95.0 + 61, scan(3, 0.6))
@@ -275,3 +275,34 @@ def test_model_file_with_a_bad_tracking_section_is_refused(synthetic,
                        match='tracking section: tracking parameter '
                              'floor_rate = -1.0'):
         load_model(tmp_path / 'bad.npz')
+
+
+# the recognizer -------------------------------------------------------------
+def test_recognizer_answers_tracked_and_keeps_the_scan_answer(synthetic):
+    from wifi_place_recognition.core.recognizer import PlaceRecognizer, WARN
+    model = load_model(synthetic[1])
+    model.tracking = TrackingParams(floor_rate=2e-3, temperature=1.0)
+    k = len(model.classes)
+    evidence = iter([scan(0, 0.9, k)] * 10 + [scan(1, 0.9, k)]
+                    + [scan(0, 0.9, k)] * 3)
+    recognizer = PlaceRecognizer(model, forward=lambda rssi: next(evidence))
+    recognizer.track(True, 600.0)
+    names = model.ap_ids[:5]
+    places = [recognizer.classify(names, [-60] * 5, 5.0 * i)
+              for i in range(14)]
+    wrong = places[10]
+    assert (wrong.scan_building, wrong.scan_floor) == tuple(model.classes[1])
+    assert (wrong.building, wrong.floor) == tuple(model.classes[0])
+    assert 'this scan alone: building %d, floor %d (p=0.90)' % tuple(
+        model.classes[1]) in wrong.message
+    assert wrong.probabilities.sum() == pytest.approx(1)
+    assert wrong.probabilities.argmax() == 0     # the tracked belief
+    assert all((p.building, p.floor) == tuple(model.classes[0])
+               for p in places)
+    # without tracking (or without a time) the answer is the scan's own
+    recognizer.track(False, 600.0)
+    evidence = iter([scan(1, 0.4, k)])
+    alone = recognizer.classify(names, [-60] * 5, 100.0)
+    assert (alone.building, alone.floor) == tuple(model.classes[1])
+    assert alone.confidence == alone.scan_confidence == 0.4
+    assert alone.level == WARN and 'this scan alone' not in alone.message

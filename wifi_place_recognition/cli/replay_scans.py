@@ -3,6 +3,7 @@
 import argparse
 import sys
 
+import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
 
@@ -25,6 +26,14 @@ def main(argv=None):
     p.add_argument('--rate', type=float, default=0.0,
                    help='scans per second; 0 (default): send each scan '
                         'when the previous one is answered')
+    p.add_argument('--realtime', type=float, default=0.0, metavar='FACTOR',
+                   help='replay each walk in TIMESTAMP order at its '
+                        'recorded pace times FACTOR (1: real time, 10: ten '
+                        'times faster; each scan is also answered before '
+                        'the next); needs a TIMESTAMP column')
+    p.add_argument('--max-wait', type=float, default=10.0, metavar='S',
+                   help='--realtime: wait at most S seconds between two '
+                        'scans (default: %(default)s)')
     p.add_argument('--limit', type=int, default=None,
                    help='replay at most N rows')
     p.add_argument('--place-topic', default='/classifier_node/place',
@@ -44,12 +53,17 @@ def main(argv=None):
     add_download_arguments(p)
     add_data_arguments(p)
     args, ros_args = p.parse_known_args(argv)
+    if args.realtime < 0 or (args.realtime and args.rate):
+        p.error('--realtime FACTOR must be > 0, and not with --rate')
     fp = read_data(args.data, args, 'data', role='test')
+    if args.realtime and 'TIMESTAMP' not in fp.meta:
+        p.error(f'--realtime: {fp.source} has no TIMESTAMP column')
     rclpy.init(args=ros_args)
     node = rclpy.create_node('scan_replayer')
     try:
-        n, answers = replay(node, fp, args,
-                            lambda s: print(s, file=sys.stderr, flush=True))
+        rows, answers = replay(node, fp, args,
+                               lambda s: print(s, file=sys.stderr,
+                                               flush=True))
     except (KeyboardInterrupt, ExternalShutdownException):
         return 130
     except RuntimeError as exc:
@@ -58,15 +72,16 @@ def main(argv=None):
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-    summary, predictions = summarise(fp, n, answers)
+    summary, predictions = summarise(fp, rows, answers)
     if args.predictions:
-        write_predictions(args.predictions, fp, predictions)
-    print(f'{fp.source}: {summary["answered"]}/{n} scans answered '
+        write_predictions(args.predictions, fp.subset(np.sort(rows)),
+                          predictions)
+    print(f'{fp.source}: {summary["answered"]}/{len(rows)} scans answered '
           f'({summary["rejected"]} rejected)')
     for key in ('building_accuracy', 'floor_accuracy',
                 'building_floor_accuracy'):
         print(f'  {key.replace("_", " "):24s} {summary[key]:.4f}')
-    return 0 if summary['answered'] == n else 1
+    return 0 if summary['answered'] == len(rows) else 1
 
 
 if __name__ == '__main__':

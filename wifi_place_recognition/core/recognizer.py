@@ -6,13 +6,14 @@ import numpy as np
 
 from .model import ScanForward
 from .scan import ScanMapper
+from .tracking import PlaceTracker
 
 OK, WARN = 'ok', 'warn'
 
 
 @dataclass
 class Place:
-    """The answer for one scan."""
+    """The answer after one scan: tracked when tracking, and the scan's own."""
 
     building: int
     floor: int
@@ -23,6 +24,9 @@ class Place:
     clipped: int
     level: str                  # OK or WARN
     message: str
+    scan_building: int          # this scan alone
+    scan_floor: int
+    scan_confidence: float
 
 
 class PlaceRecognizer:
@@ -33,7 +37,9 @@ class PlaceRecognizer:
     fewer than ``min_known_aps`` APs of the scan are known to the model.
     :meth:`classify` raises :class:`ScanRejected` for a scan it cannot use.
     ``forward`` turns a model-ordered RSSI vector into class probabilities
-    (default: the numpy :class:`ScanForward` of ``model``).
+    (default: the numpy :class:`ScanForward` of ``model``). With a
+    ``tracker`` (:meth:`track`), scans given a time are tracked over time
+    and the answer is the tracked one.
     """
 
     def __init__(self, model, min_confidence=0.5, min_known_aps=3,
@@ -43,15 +49,35 @@ class PlaceRecognizer:
         self.mapper = ScanMapper(model.ap_ids, max_aps)
         self.min_confidence = min_confidence
         self.min_known_aps = min_known_aps
+        self.tracker = None
 
-    def classify(self, names, rssi):
-        """Return a :class:`Place` for parallel AP name / RSSI sequences."""
+    def track(self, enabled, timeout):
+        """Start tracking afresh (the model file's parameters), or stop."""
+        self.tracker = PlaceTracker(self.model.classes, self.model.tracking,
+                                    timeout) if enabled else None
+
+    def classify(self, names, rssi, time=None):
+        """
+        Return a :class:`Place` for parallel AP name / RSSI sequences.
+
+        ``time`` (s) is when the scan was taken; tracking needs it.
+        """
         scan = self.mapper.map(names, rssi)
         proba = self.forward(scan.rssi)
         best = int(proba.argmax())
-        building, floor = (int(v) for v in self.model.classes[best])
-        confidence = float(proba[best])
+        scan_building, scan_floor = (int(v) for v in self.model.classes[best])
+        scan_confidence = float(proba[best])
+        if self.tracker is None or time is None:
+            building, floor = scan_building, scan_floor
+            confidence, probabilities = scan_confidence, proba
+        else:
+            track = self.tracker.update(time, proba)
+            building, floor = track.building, track.floor
+            confidence, probabilities = track.confidence, track.belief
         message = f'building {building}, floor {floor} (p={confidence:.2f})'
+        if (building, floor) != (scan_building, scan_floor):
+            message += (f'; this scan alone: building {scan_building}, '
+                        f'floor {scan_floor} (p={scan_confidence:.2f})')
         level = OK
         if confidence < self.min_confidence:
             level = WARN
@@ -60,5 +86,6 @@ class PlaceRecognizer:
             level = WARN
             message += (f'; only {scan.known} known APs (< '
                         f'{self.min_known_aps})')
-        return Place(building, floor, confidence, proba, scan.known,
-                     scan.unknown, scan.clipped, level, message)
+        return Place(building, floor, confidence, probabilities, scan.known,
+                     scan.unknown, scan.clipped, level, message,
+                     scan_building, scan_floor, scan_confidence)

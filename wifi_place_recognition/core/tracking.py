@@ -14,8 +14,8 @@ per scan:
 - update: multiply by the scan's class probabilities raised to
   ``1 / temperature`` (single-scan probabilities are over-confident, and
   neighbouring scans of a walk make correlated errors);
-- after a gap longer than ``timeout`` seconds (or time running backwards)
-  the belief restarts from the scan alone.
+- after a gap longer than the tracker's ``timeout`` (or time running
+  backwards) the belief restarts from the scan alone.
 
 An optional position (x, y with a 2x2 covariance per scan) is smoothed by a
 Kalman filter with a constant-velocity motion model (white-noise
@@ -36,6 +36,8 @@ import numpy as np
 #: Smallest class probability used as evidence (a softmax can underflow).
 MIN_PROBABILITY = 1e-12
 LOG_FLOOR = math.log(1e-6)
+#: Seconds without a scan after which the belief restarts.
+DEFAULT_TIMEOUT = 600.0
 # Blocks of the constant-velocity model's 4x4 matrices (x, y, vx, vy).
 _IDENTITY4 = np.eye(4)
 _VELOCITY = np.eye(4, k=2)                      # position += dt * velocity
@@ -53,7 +55,6 @@ class TrackingParams:
     temperature: float = 2.0         # evidence = probabilities ** (1 / T)
     acceleration_noise: float = 0.1  # m^2/s^3 per axis
     speed_sd: float = 1.0            # m/s per axis, when a track starts
-    timeout: float = 600.0           # s: a longer gap restarts the belief
     fit: dict = None                 # how they were chosen (free-form)
 
     def __post_init__(self):
@@ -65,7 +66,7 @@ class TrackingParams:
                     raise ValueError(f'tracking fit must be an object, got '
                                      f'{type(value).__name__}')
                 continue
-            positive = f.name in ('temperature', 'timeout')
+            positive = f.name == 'temperature'
             if isinstance(value, bool) or \
                     not isinstance(value, (int, float)) or \
                     not math.isfinite(value) or value < 0 or \
@@ -187,12 +188,14 @@ class PlaceTracker:
     Online filter over building/floor classes (and optionally position).
 
     ``classes`` is the model's (k, 2) array of [building, floor]. Feed every
-    answered scan to :meth:`update`; :meth:`reset` forgets everything.
+    answered scan to :meth:`update`; :meth:`reset` forgets everything. A gap
+    of more than ``timeout`` seconds restarts the belief.
     """
 
-    def __init__(self, classes, params=None):
+    def __init__(self, classes, params=None, timeout=DEFAULT_TIMEOUT):
         self.classes = np.asarray(classes, np.int64)
         self.params = params or TrackingParams()
+        self.timeout = timeout
         self.floor_jump, self.building_jump = _jump_matrices(self.classes)
         self.position = PositionFilter(self.params)
         self.reset()
@@ -229,7 +232,7 @@ class PlaceTracker:
         evidence **= 1.0 / self.params.temperature
         dt = None if self.last_time is None else time - self.last_time
         restarted = (self.belief is None or dt < 0
-                     or dt > self.params.timeout)
+                     or dt > self.timeout)
         belief = evidence if restarted else \
             self.predict(self.belief, dt) * evidence
         self.belief = belief / belief.sum()
@@ -261,11 +264,11 @@ def split_walks(keys, times):
     times = np.asarray(times, np.float64)
     order = np.lexsort((times,) + tuple(np.asarray(k) for k in
                                         reversed(keys)))
-    if not keys:
-        return [order]
-    stacked = np.stack([np.asarray(k)[order] for k in keys], axis=1)
-    starts = np.flatnonzero(np.any(stacked[1:] != stacked[:-1], axis=1)) + 1
-    return np.split(order, starts)
+    new = np.zeros(max(len(order) - 1, 0), bool)
+    for key in keys:
+        key = np.asarray(key)[order]
+        new |= key[1:] != key[:-1]
+    return np.split(order, np.flatnonzero(new) + 1)
 
 
 def track_walk(tracker, times, proba, xy=None, cov=None):
@@ -316,7 +319,7 @@ def _rate_mle(dt, changed):
     return math.sqrt(low * high)
 
 
-def fit_rates(walks, timeout=TrackingParams.timeout):
+def fit_rates(walks, timeout=DEFAULT_TIMEOUT):
     """
     Fit ``floor_rate`` and ``building_rate`` on labelled walks.
 
@@ -339,7 +342,8 @@ def fit_rates(walks, timeout=TrackingParams.timeout):
     f = np.concatenate(floor_changed)
     building_rate = _rate_mle(dt, b)
     floor_rate = _rate_mle(dt[~b], f[~b])
-    summary = {'pairs': int(len(dt)), 'hours': round(dt.sum() / 3600, 3),
+    summary = {'pairs': int(len(dt)),
+               'hours': round(float(dt.sum()) / 3600, 3),
                'floor_changes': int(f.sum()),
                'building_changes': int(b.sum())}
     return floor_rate, building_rate, summary
@@ -389,7 +393,7 @@ def fit_evidence(params, classes, walks,
                    min_interval=best['min_interval']), grid
 
 
-def _motion_log_likelihood(params, walks, measurement_var):
+def _motion_log_likelihood(params, walks, measurement_var, timeout):
     """Return the log-likelihood of the walks' positions under the filter."""
     track = PositionFilter(params)
     cov = measurement_var * np.eye(2)
@@ -398,7 +402,7 @@ def _motion_log_likelihood(params, walks, measurement_var):
         track.reset()
         last = None
         for t, z in zip(times, xy):
-            if last is not None and 0 <= t - last <= params.timeout:
+            if last is not None and 0 <= t - last <= timeout:
                 track.predict(t - last)
                 innovation_cov = track.cov[:2, :2] + cov
                 r = z - track.state[:2]
@@ -411,7 +415,7 @@ def _motion_log_likelihood(params, walks, measurement_var):
     return total
 
 
-def fit_motion(walks, measurement_var=0.25,
+def fit_motion(walks, measurement_var=0.25, timeout=DEFAULT_TIMEOUT,
                accelerations=tuple(10.0 ** np.arange(-3, 1.01, 0.25))):
     """
     Fit ``speed_sd`` and ``acceleration_noise`` on walks with positions.
@@ -421,7 +425,7 @@ def fit_motion(walks, measurement_var=0.25,
     speed per axis between consecutive scans; ``acceleration_noise`` the
     grid value under which the constant-velocity filter predicts the next
     true position best (likelihood of its innovations). Consecutive scans
-    further apart than the timeout restart the filter, as in use. Return
+    further apart than ``timeout`` restart the filter, as in use. Return
     (speed_sd, acceleration_noise).
     """
     walks = list(walks)
@@ -436,6 +440,6 @@ def fit_motion(walks, measurement_var=0.25,
         raise ValueError('no consecutive scans with positions')
     base = TrackingParams(speed_sd=float(np.sqrt(np.mean(speeds ** 2))))
     scores = [_motion_log_likelihood(replace(base, acceleration_noise=a),
-                                     walks, measurement_var)
+                                     walks, measurement_var, timeout)
               for a in accelerations]
     return base.speed_sd, float(accelerations[int(np.argmax(scores))])

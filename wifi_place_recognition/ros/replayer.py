@@ -3,9 +3,13 @@ Publish the rows of a fingerprint CSV as WiFi scans and collect the answers.
 
 A stand-in for a robot's WiFi driver: each row becomes a
 ``sensor_msgs/JointState`` on ``wifi/scan`` (AP names from the CSV header,
-undetected APs left out). The classifier node's answers on its ``~/place``
-topic are matched to scans by ``header.stamp``; at the end the number of
-answered scans and the accuracy against the CSV labels are summarised.
+undetected APs left out), stamped with the row's TIMESTAMP when the data
+has one (else the current time), so a tracking node sees the recorded time
+between scans. With a real-time factor the walks are replayed in time order
+at their recorded pace (or a multiple of it). The classifier node's answers
+on its ``~/place`` topic are matched to scans by ``header.stamp``; at the
+end the number of answered scans and the accuracy against the CSV labels
+are summarised.
 """
 
 import time
@@ -13,10 +17,12 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
 import rclpy
+from builtin_interfaces.msg import Time
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from ..core.metrics import accuracies
+from ..data.walks import walks
 from .messages import scan_message, status_values
 
 
@@ -63,19 +69,45 @@ class Replayer:
         return done()
 
 
+def unique_stamps(seconds):
+    """
+    Return a ``Time`` per recorded time (s), all distinct and non-zero.
+
+    Times are kept to the microsecond. Answers are matched to scans by
+    stamp: a time already used (or zero, which means "no stamp") is moved
+    on by a microsecond.
+    """
+    used, stamps = set(), []
+    for t in seconds:
+        ns = round(float(t) * 1e6) * 1000
+        while ns in used or ns == 0:
+            ns += 1000
+        used.add(ns)
+        sec, nanosec = divmod(ns, 10 ** 9)
+        stamps.append(Time(sec=sec, nanosec=nanosec))
+    return stamps
+
+
 def replay(node, fp, args, log):
-    """Publish every row of ``fp``; return {row: DiagnosticStatus}."""
+    """Publish the rows of ``fp``; return (rows sent, {row: status})."""
     replayer = Replayer(node, args.place_topic)
     if not replayer.wait_for_node(args.wait):
         raise RuntimeError(f'no classifier node answered within {args.wait} '
                            f's (is it running, on the same ROS_DOMAIN_ID, '
                            f'publishing {args.place_topic}?)')
+    times = fp.meta.get('TIMESTAMP')
+    order = np.concatenate(walks(fp)) if args.realtime else \
+        np.arange(len(fp))
     n = len(fp) if args.limit is None else min(args.limit, len(fp))
+    order = order[:n]
+    stamps = None if times is None else unique_stamps(times[order])
     period = 1.0 / args.rate if args.rate > 0 else 0.0
     next_time = time.monotonic()
-    for row in range(n):
-        stamp = node.get_clock().now().to_msg()
+    for i, row in enumerate(order):
+        stamp = node.get_clock().now().to_msg() if stamps is None \
+            else stamps[i]
         msg = scan_message(fp.ap_ids, fp.rssi[row], stamp)
+        sent_at = time.monotonic()
         replayer.publish(row, msg)
         if period:
             next_time += period
@@ -87,30 +119,43 @@ def replay(node, fp, args, log):
                 if replayer.spin_until(lambda: row in replayer.answers,
                                        time.monotonic() + args.timeout):
                     break
-        if (row + 1) % args.progress == 0 or row + 1 == n:
-            log(f'{row + 1}/{n} scans sent, {len(replayer.answers)} '
+        if args.realtime and i + 1 < n:  # and the recorded gap, capped
+            gap = (times[order[i + 1]] - times[row]) / args.realtime
+            replayer.spin_until(lambda: False, sent_at + min(
+                max(gap, 0.0), args.max_wait))   # (< 0: the next walk)
+        if (i + 1) % args.progress == 0 or i + 1 == n:
+            log(f'{i + 1}/{n} scans sent, {len(replayer.answers)} '
                 f'answered')
     replayer.spin_until(lambda: len(replayer.answers) >= n,
                         time.monotonic() + args.timeout)
-    return n, replayer.answers
+    return order, replayer.answers
 
 
-def summarise(fp, n, answers):
-    """Return (summary dict, predictions) for the answered scans."""
-    building = np.full(n, -1)
-    floor = np.full(n, -1)
-    confidence = np.full(n, np.nan)
+def summarise(fp, rows, answers):
+    """
+    Return (summary dict, predictions) for the scans of ``rows`` (sent).
+
+    Predictions are arrays in the order of ``fp.subset(np.sort(rows))``.
+    """
+    rows = np.sort(rows)
+    building = np.full(len(rows), -1)
+    floor = np.full(len(rows), -1)
+    confidence = np.full(len(rows), np.nan)
     rejected = 0
-    for row, status in answers.items():
-        values = status_values(status)
+    for i, row in enumerate(rows):
+        status = answers.get(row)
+        if status is None:
+            continue
         if status.level == DiagnosticStatus.ERROR:
             rejected += 1
             continue
-        building[row] = int(values['building'])
-        floor[row] = int(values['floor'])
-        confidence[row] = float(values['confidence'])
+        values = status_values(status)
+        building[i] = int(values['building'])
+        floor[i] = int(values['floor'])
+        confidence[i] = float(values['confidence'])
     ok = building >= 0
-    summary = {'sent': n, 'answered': len(answers), 'rejected': rejected}
-    summary.update(accuracies(fp.building[:n][ok], fp.floor[:n][ok],
+    summary = {'sent': len(rows), 'answered': len(answers),
+               'rejected': rejected}
+    summary.update(accuracies(fp.building[rows][ok], fp.floor[rows][ok],
                               building[ok], floor[ok]))
     return summary, (building, floor, confidence)
