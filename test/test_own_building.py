@@ -3,6 +3,7 @@
 import os
 from pathlib import Path
 import signal
+import threading
 import time
 
 from conftest import FAST, python_module, run, wait_until
@@ -12,12 +13,13 @@ import pytest
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from ros_helpers import Client, NodeProcess
 from sensor_msgs.msg import JointState
+from signals import busy_core
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.recording import FingerprintLog, RecordingError
 from wifi_place_recognition.ros.messages import status_values
 from wifi_place_recognition.data.wifi_sources import (
-    nm_percent_to_dbm, parse_iw, parse_nmcli, read_source, scan,
-    SourceError, wireless_interfaces)
+    drop_stale, parse_iw, parse_nmcli, Reading, SourceError, SourceRunner,
+    wireless_interfaces)
 
 FIXTURES = Path(__file__).parent / 'fixtures'
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -31,25 +33,60 @@ def fixture(name):
 
 def test_iw_scan_output():
     assert parse_iw(fixture('iw_scan.txt')) == [
-        ('00:11:22:33:44:55', -45.0), ('aa:bb:cc:dd:ee:01', -71.5),
-        ('aa:bb:cc:dd:ee:02', -88.0)]
+        ('00:11:22:33:44:55', -45.0, 0.02), ('aa:bb:cc:dd:ee:01', -71.5, 0.25),
+        ('aa:bb:cc:dd:ee:02', -88.0, None)]
 
 
 def test_iw_truncated_and_garbled_output_keeps_the_complete_entries():
     assert parse_iw(fixture('iw_scan_truncated.txt')) == [
-        ('00:11:22:33:44:55', -45.0)]
+        ('00:11:22:33:44:55', -45.0, None)]
+    # The output ends inside "signal: -6x.00 dBm": not a reading.
+    assert parse_iw(fixture('iw_scan_cut_number.txt')) == [
+        ('00:11:22:33:44:55', -45.0, 0.02)]
+    # Bad MAC, "banana", -300 dBm, "dB", a garbled age, a quality: skipped.
     assert parse_iw(fixture('iw_scan_garbled.txt')) == [
-        ('00:11:22:33:44:88', -60.0)]
+        ('00:11:22:33:44:88', -60.0, None)]
     assert parse_iw('') == []
 
 
-def test_nmcli_terse_output_and_the_percent_conversion():
+def test_iw_dump_entries_older_than_max_age_are_dropped():
+    readings = parse_iw(fixture('iw_scan_dump_old_entries.txt'))
+    assert [r.age_s for r in readings] == [0.12, 0.64, 1.8, 3.4, 5.2, 9.1,
+                                           17.0, 29.0]
+    fresh, dropped = drop_stale(readings, 5.0)
+    assert [r.bssid for r in fresh] == [f'02:11:22:33:44:0{i}'
+                                        for i in range(1, 5)]
+    assert dropped == 4
+    assert drop_stale(readings + [Reading('aa:bb:cc:dd:ee:ff', -50.0)],
+                      0.1) == ([Reading('aa:bb:cc:dd:ee:ff', -50.0)], 8)
+
+
+def network_manager_percent(dbm):
+    """Return NetworkManager's nm_wifi_utils_level_to_quality(dbm)."""
+    val = abs(min(max(dbm, -100), -40) + 40)
+    return min(max(100 - int((100.0 * val) / 60.0), 0), 100)
+
+
+def test_nmcli_percent_is_inverted_as_network_manager_computes_it():
     assert parse_nmcli(fixture('nmcli.txt')) == [
-        ('00:11:22:33:44:55', -20.0), ('aa:bb:cc:dd:ee:01', -71.0),
-        ('aa:bb:cc:dd:ee:02', -90.0)]
+        ('00:11:22:33:44:55', -40.0, None),
+        ('aa:bb:cc:dd:ee:01', pytest.approx(-70.6), None),
+        ('aa:bb:cc:dd:ee:02', pytest.approx(-80.8), None),
+        ('aa:bb:cc:dd:ee:03', -100.0, None)]
+    # Every dBm NetworkManager can see, as nmcli -t prints it.
+    levels = range(-110, -29)
+    terse = ''.join(f'02\\:00\\:00\\:00\\:00\\:{i:02x}:'
+                    f'{network_manager_percent(d)}:2412 MHz\n'
+                    for i, d in enumerate(levels))
+    for dbm, reading in zip(levels, parse_nmcli(terse)):
+        clipped = min(max(dbm, -100), -40)      # NM's own clamp
+        assert reading.dbm - 0.6 < clipped <= reading.dbm, (dbm, reading)
+
+
+def test_nmcli_garbled_lines_are_skipped():
     assert parse_nmcli(fixture('nmcli_garbled.txt')) == [
-        ('00:11:22:33:44:55', -20.0), ('aa:bb:cc:dd:ee:04', -50.0)]
-    assert nm_percent_to_dbm(10) == -90.0      # below NM's floor
+        ('00:11:22:33:44:55', -40.0, None),
+        ('aa:bb:cc:dd:ee:04', -58.0, None)]
 
 
 @pytest.fixture
@@ -71,15 +108,43 @@ def test_sources_fall_back_in_order_and_say_why(fake_tools):
     fake_tools('iw', 'if [ "$4" = dump ]; then cat "{}"; exit 0; fi\n'
                'echo "command failed: Operation not permitted (-1)" >&2\n'
                'exit 255\n'.format(FIXTURES / 'iw_scan.txt'))
-    source, readings = scan(['iw', 'iw_dump', 'nmcli'], 'wlan0')
+    runner = SourceRunner()
+    source, readings = runner.scan(['iw', 'iw_dump', 'nmcli'], 'wlan0')
     assert source == 'iw_dump' and len(readings) == 3
     with pytest.raises(SourceError) as err:
-        scan(['iw', 'nmcli'], 'wlan0')
+        runner.scan(['iw', 'nmcli'], 'wlan0')
     assert 'Operation not permitted' in str(err.value)
     assert 'nmcli is not installed' in str(err.value)
     fake_tools('nmcli', 'echo "some unrelated text"\n')
     with pytest.raises(SourceError, match='no readable AP'):
-        read_source('nmcli', 'wlan0')
+        runner.read('nmcli', 'wlan0')
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return Path(f'/proc/{pid}/stat').read_text().split()[2] != 'Z'
+
+
+def test_a_hanging_command_times_out_or_is_cancelled_with_its_children(
+        fake_tools, tmp_path):
+    pids = tmp_path / 'pids'
+    fake_tools('iw', f'sleep 1000 & echo $! >> "{pids}"; wait\n')
+    t0 = time.monotonic()
+    with pytest.raises(SourceError, match='took more than 0.5 s'):
+        SourceRunner(timeout=0.5).read('iw', 'wlan0')
+    assert time.monotonic() - t0 < 3
+    runner = SourceRunner(timeout=60)
+    threading.Timer(0.5, runner.cancel).start()
+    t0 = time.monotonic()
+    with pytest.raises(SourceError, match='stopped'):
+        runner.scan(['iw', 'iw_dump'], 'wlan0')
+    assert time.monotonic() - t0 < 3
+    children = [int(p) for p in pids.read_text().split()]
+    assert len(children) == 2
+    assert wait_until(lambda: not any(map(_alive, children)), 5), children
 
 
 def test_wireless_interfaces(tmp_path):
@@ -125,9 +190,14 @@ def test_recording_continues_after_a_torn_line(tmp_path):
 
 # nodes over ROS ----------------------------------------------------------------
 
-def test_scanner_node_publishes_from_iw_and_reports_errors(
+def _statuses(diags, name, level=None):
+    return [s for d in diags for s in d.status if s.name == f'{name}: scanner'
+            and (level is None or s.level == level)]
+
+
+def test_scanner_node_publishes_fresh_readings_and_reports_errors(
         ros, fake_tools, tmp_path):
-    fake_tools('iw', f'cat "{FIXTURES / "iw_scan.txt"}"\n')
+    fake_tools('iw', f'cat "{FIXTURES / "iw_scan_dump_old_entries.txt"}"\n')
     scans, diags = [], []
     subs = [ros.create_subscription(JointState, 'wifi/scan', scans.append,
                                     qos_profile_sensor_data),
@@ -137,15 +207,29 @@ def test_scanner_node_publishes_from_iw_and_reports_errors(
     good = NodeProcess(tmp_path, python_module(
         'ros.wifi_scanner_node', '--ros-args', '-p', 'interface:=wlan7', '-p',
         'period:=0.2'), 'scanner_ok', env=env)
+    client = Client(ros, 'scanner_ok')
     try:
         assert wait_until(lambda: scans, 20, ros), good.stop()[1]
+        # Default max_age: the period + the command's run time (~0.2 s).
+        assert scans[0].header.frame_id == 'wlan7'
+        assert list(scans[0].name) == ['02:11:22:33:44:01']
+        assert list(scans[0].position) == [-52.0]
+        assert wait_until(lambda: _statuses(diags, 'scanner_ok'), 5, ros)
+        status = _statuses(diags, 'scanner_ok')[-1]
+        assert status.level == DiagnosticStatus.OK
+        assert '1 APs from iw (7 older than 0.2 s dropped)' in \
+            status.message, status.message
+        assert int(status_values(status)['stale_readings']) >= 7
+        assert client.set_param('max_age', 5.0).successful
+        assert not client.set_param('max_age', -1.0).successful
+        scans.clear()
+        assert wait_until(lambda: len(scans) >= 2, 5, ros)
+        assert list(scans[-1].name) == [f'02:11:22:33:44:0{i}'
+                                        for i in range(1, 5)]
     finally:
+        client.close()
         code, log = good.stop()
     assert code == 0 and 'Traceback' not in log, log
-    assert scans[0].header.frame_id == 'wlan7'
-    assert list(scans[0].name) == ['00:11:22:33:44:55', 'aa:bb:cc:dd:ee:01',
-                                   'aa:bb:cc:dd:ee:02']
-    assert list(scans[0].position) == [-45.0, -71.5, -88.0]
 
     (fake_tools.folder / 'iw').unlink()          # the tool disappears
     bad = NodeProcess(tmp_path, python_module(
@@ -153,17 +237,56 @@ def test_scanner_node_publishes_from_iw_and_reports_errors(
         'period:=0.2', '-p', 'sources:=[iw, nmcli]'), 'scanner_bad', env=env)
 
     def errors():
-        return [s for d in diags for s in d.status
-                if s.name == 'scanner_bad: scanner' and
-                s.level == DiagnosticStatus.ERROR]
+        return _statuses(diags, 'scanner_bad', DiagnosticStatus.ERROR)
     try:
         assert wait_until(lambda: len(errors()) >= 3, 20, ros)
     finally:
         code, log = bad.stop()
     assert code == 0 and 'Traceback' not in log, log
     assert 'iw is not installed' in errors()[0].message
+    assert 'nmcli is not installed' in errors()[0].message
     for sub in subs:
         ros.destroy_subscription(sub)
+
+
+def test_scanner_node_stays_responsive_while_iw_hangs(
+        ros, fake_tools, tmp_path):
+    pids = tmp_path / 'pids'
+    fake_tools('iw', f'sleep 1000 & echo $! >> "{pids}"; wait\n')
+    diags = []
+    sub = ros.create_subscription(DiagnosticArray, '/diagnostics',
+                                  diags.append, RELIABLE)
+    node = NodeProcess(tmp_path, python_module(
+        'ros.wifi_scanner_node', '--ros-args', '-p', 'interface:=wlan7', '-p',
+        'period:=0.5', '-p', 'sources:=[iw]'), 'scanner_hang')
+    client = Client(ros, 'scanner_hang')
+    try:
+        assert wait_until(lambda: client.params.service_is_ready(), 20, ros)
+        # While the first scan hangs: statuses keep coming, parameters work.
+        assert wait_until(lambda: pids.exists(), 10, ros)
+        t0 = time.monotonic()
+        assert client.set_param('max_age', 3.0).successful
+        assert time.monotonic() - t0 < 1.0
+        assert wait_until(lambda: any(
+            float(status_values(s)['scan_running_s']) >= 1.0
+            for s in _statuses(diags, 'scanner_hang')), 5, ros)
+        # The 2.5 s timeout (5 periods) ends it with the reason.
+        assert wait_until(lambda: _statuses(
+            diags, 'scanner_hang', DiagnosticStatus.ERROR), 10, ros)
+        error = _statuses(diags, 'scanner_hang', DiagnosticStatus.ERROR)[0]
+        assert 'took more than 2.5 s' in error.message
+        # Stopped while the next scan hangs: a quick, clean exit.
+        assert wait_until(lambda: len(pids.read_text().split()) >= 2, 10,
+                          ros)
+    finally:
+        client.close()
+        ros.destroy_subscription(sub)
+        t0 = time.monotonic()
+        code, log = node.stop()
+    assert code == 0 and 'Traceback' not in log, log
+    assert time.monotonic() - t0 < 5
+    children = [int(p) for p in pids.read_text().split()]
+    assert wait_until(lambda: not any(map(_alive, children)), 5), children
 
 
 class FloorSimulator:
@@ -291,6 +414,57 @@ def test_the_whole_loop_in_a_simulated_building(ros, tmp_path):
         code, log = node.stop()
     assert code == 0, log
     assert right >= 0.9 * 20 * len(sim.floors), trained.stdout
+
+
+def test_recorder_keeps_every_scan_at_10_hz_on_a_busy_machine(ros, tmp_path):
+    csv_path = tmp_path / 'survey.csv'
+    sim = FloorSimulator(seed=2, n_aps=200)
+    progress = []
+    sub = ros.create_subscription(
+        DiagnosticArray, '/diagnostics',
+        lambda m: progress.extend(s for s in m.status
+                                  if s.name == 'survey: progress'),
+        RELIABLE)
+    # The scanner's QoS: best effort, depth 5.
+    pub = ros.create_publisher(JointState, 'wifi/scan',
+                               qos_profile_sensor_data)
+    recorder = NodeProcess(tmp_path, python_module(
+        'ros.record_fingerprints', '--ros-args', '-p', f'output:={csv_path}',
+        '-p', 'building:=0', '-p', 'floor:=1'), 'survey')
+    sent = 60
+    try:
+        with busy_core():
+            assert wait_until(lambda: pub.get_subscription_count() and
+                              progress, 20, ros), recorder.stop()[1]
+            t0 = time.monotonic()
+            for i in range(sent):
+                pub.publish(client_scan(*sim.scan(0), stamp=i + 1))
+                # Scans 20-34 at once: what waits in the queue when the
+                # recorder stalls 1.5 s (a slow disk, a long rewrite).
+                if not 20 <= i < 35:
+                    wait_until(lambda: time.monotonic() > t0 + (i + 1) / 10,
+                               1, ros)
+
+            def counted():
+                values = status_values(progress[-1])
+                return int(values.get('scans/B0F1', 0)) == sent
+            wait_until(counted, 20, ros)
+    finally:
+        ros.destroy_publisher(pub)
+        ros.destroy_subscription(sub)
+        code, log = recorder.stop()
+    assert code == 0 and 'Traceback' not in log, log
+    values = status_values(progress[-1])
+    assert (values['scans/B0F1'], values['scans_received'],
+            values['scans_lost']) == (str(sent), str(sent), '0'), values
+    assert FingerprintLog(csv_path).counts[(0, 1)] == sent
+
+
+def client_scan(names, rssi, stamp):
+    """Return a scan message with ``stamp`` seconds."""
+    msg = JointState(name=list(names), position=list(rssi))
+    msg.header.stamp.sec = stamp
+    return msg
 
 
 def test_killed_recorder_continues_the_same_file(ros, tmp_path):

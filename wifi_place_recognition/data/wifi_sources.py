@@ -1,27 +1,50 @@
-"""
+r"""
 Where a robot's WiFi scans come from on Linux: ``iw`` and NetworkManager.
 
 ROS-free: parsers of the tools' text output and a runner that tries the
-sources in order. Each reading is ``(bssid, rssi_dbm)`` with the BSSID in
-lower-case ``aa:bb:cc:dd:ee:ff`` form.
+sources in order. Each reading is a :class:`Reading`: the BSSID in
+lower-case ``aa:bb:cc:dd:ee:ff`` form, the RSSI in dBm and, from ``iw``, how
+long ago the AP was last seen.
 
 - ``iw dev IF scan``: triggers a fresh scan (needs CAP_NET_ADMIN).
 - ``iw dev IF scan dump``: the kernel's cached results of the last scan
   (any scan, also NetworkManager's); no privileges needed.
-- ``nmcli -t -f BSSID,SIGNAL,FREQ dev wifi list ifname IF``: SIGNAL is a
-  percentage. NetworkManager computes it from dBm (nl80211) as
-  ``100 - 70 * (-20 - dBm) / 70`` clamped to [-90, -20] dBm, i.e.
-  ``percent = dBm + 120``; so ``dBm = percent - 120``, and any percentage
-  under 30 reads as -90 dBm (the floor NetworkManager reports).
+  Both print the kernel's whole cache: each BSS's ``last seen: N ms ago``
+  tells the fresh entries from those of an earlier scan.
+- ``nmcli -t -f BSSID,SIGNAL,FREQ dev wifi list ifname IF``: terse output,
+  ``:`` inside a field escaped as ``\:``. SIGNAL is a percentage that
+  NetworkManager computes from dBm (``nm_wifi_utils_level_to_quality``)
+  with a linear map clamped to [-100, -40] dBm:
+  ``percent = 100 - int(100 * (-40 - clamp(dBm, -100, -40)) / 60)``. So
+  ``dBm = -40 - 0.6 * (100 - percent)`` (within 0.6 dB); 100 % means
+  -40 dBm or stronger and 0 % -100 dBm or weaker: the reading is clipped
+  there.
 """
 
+import os
 from pathlib import Path
 import re
+import signal
 import subprocess
+import threading
+from typing import NamedTuple, Optional
+
+from ..core.rssi import plausible
 
 MAC = re.compile(r'^[0-9a-f]{2}(:[0-9a-f]{2}){5}$')
-NM_FLOOR_DBM = -90.0
-NM_OFFSET_DB = 120.0
+IW_SIGNAL = re.compile(r'^signal: (-?\d+(?:\.\d+)?) dBm$')
+IW_AGE = re.compile(r'^last seen: (\d+) ms ago$')
+IW_BOOTTIME = re.compile(r'^last seen: \d+\.\d+s \[boottime\]$')
+NM_BEST_DBM = -40.0
+NM_DB_PER_PERCENT = 0.6
+
+
+class Reading(NamedTuple):
+    """One AP in a scan; ``age_s`` is None when the source does not say."""
+
+    bssid: str
+    dbm: float
+    age_s: Optional[float] = None
 
 
 class SourceError(RuntimeError):
@@ -33,40 +56,60 @@ def _mac(text):
     return text if MAC.match(text) else None
 
 
+def _iw_reading(bssid, lines):
+    """Return the Reading of one BSS block, or None if incomplete/garbled."""
+    dbm = age = None
+    for line in lines:
+        field = line.strip()
+        if field.startswith('signal:'):
+            match = IW_SIGNAL.match(field)
+            if not match:
+                return None
+            dbm = float(match.group(1))
+        elif field.startswith('last seen:') and not IW_BOOTTIME.match(field):
+            match = IW_AGE.match(field)
+            if not match:
+                return None
+            age = int(match.group(1)) / 1000.0
+    if bssid is None or dbm is None or not plausible(dbm):
+        return None
+    return Reading(bssid, dbm, age)
+
+
 def parse_iw(text):
     """
-    Return [(bssid, dBm)] from ``iw dev IF scan`` or ``scan dump`` output.
+    Return the readings in ``iw dev IF scan`` or ``scan dump`` output.
 
-    Entries without a BSSID, a signal line, or a plausible dBm value are
-    skipped, so truncated or garbled output yields the complete entries.
+    Only complete ``signal: <number> dBm`` lines count; a BSS without one,
+    with an implausible value (see :mod:`..core.rssi`), a garbled ``last
+    seen`` line or a bad BSSID is skipped, so truncated or garbled output
+    yields its complete entries.
     """
-    readings, bssid = [], None
-    for line in text.splitlines():
-        stripped = line.strip()
-        if line.startswith('BSS '):
-            bssid = _mac(line[4:].split('(')[0].split()[0]) \
-                if len(line) > 4 else None
-        elif bssid and stripped.startswith('signal:'):
-            try:
-                dbm = float(stripped.split()[1])
-            except (IndexError, ValueError):
-                continue
-            if -120.0 <= dbm <= 20.0:
-                readings.append((bssid, dbm))
-            bssid = None
+    readings, bssid, lines = [], None, None
+    for line in text.splitlines() + ['BSS']:
+        if line.startswith('BSS'):
+            if lines is not None:
+                reading = _iw_reading(bssid, lines)
+                if reading:
+                    readings.append(reading)
+            head = line[4:].split('(')[0].split()
+            bssid, lines = _mac(head[0]) if head else None, []
+        elif lines is not None:
+            lines.append(line)
     return readings
 
 
 def nm_percent_to_dbm(percent):
     """Return the dBm that NetworkManager turned into ``percent``."""
-    return max(NM_FLOOR_DBM, float(percent) - NM_OFFSET_DB)
+    return NM_BEST_DBM - NM_DB_PER_PERCENT * (100.0 - float(percent))
 
 
 def parse_nmcli(text):
     r"""
-    Return [(bssid, dBm)] from ``nmcli -t -f BSSID,SIGNAL,FREQ ...``.
+    Return the readings in ``nmcli -t -f BSSID,SIGNAL,FREQ ...`` output.
 
-    In terse output ``:`` inside a field is escaped as ``\:``.
+    In terse output ``:`` inside a field is escaped as ``\:``. Lines with a
+    bad BSSID or a SIGNAL that is not a percentage are skipped.
     """
     readings = []
     for line in text.splitlines():
@@ -79,8 +122,14 @@ def parse_nmcli(text):
         except ValueError:
             continue
         if bssid and 0.0 <= percent <= 100.0:
-            readings.append((bssid, nm_percent_to_dbm(percent)))
+            readings.append(Reading(bssid, nm_percent_to_dbm(percent)))
     return readings
+
+
+def drop_stale(readings, max_age_s):
+    """Return (readings seen within ``max_age_s``, number dropped)."""
+    fresh = [r for r in readings if r.age_s is None or r.age_s <= max_age_s]
+    return fresh, len(readings) - len(fresh)
 
 
 SOURCES = {
@@ -101,38 +150,82 @@ def wireless_interfaces(sys_class_net='/sys/class/net'):
                   if (p / 'wireless').exists() or (p / 'phy80211').exists())
 
 
-def read_source(name, iface, timeout=20.0):
-    """Run one source; return its readings or raise :class:`SourceError`."""
-    command, parse = SOURCES[name]
-    argv = command(iface)
-    try:
-        done = subprocess.run(argv, capture_output=True, text=True,
-                              timeout=timeout)
-    except FileNotFoundError:
-        raise SourceError(f'{argv[0]} is not installed') from None
-    except subprocess.TimeoutExpired:
-        raise SourceError(f'{" ".join(argv)} took more than {timeout:g} s') \
-            from None
-    if done.returncode != 0:
-        reason = (done.stderr.strip() or done.stdout.strip()
-                  or f'exit code {done.returncode}').splitlines()[-1]
-        raise SourceError(f'{" ".join(argv)}: {reason}')
-    readings = parse(done.stdout)
-    if not readings and done.stdout.strip():
-        raise SourceError(f'{" ".join(argv)}: output had no readable AP')
-    return readings
-
-
-def scan(sources, iface, timeout=20.0):
+class SourceRunner:
     """
-    Try ``sources`` in order; return (source name, readings).
+    Runs the sources' commands; :meth:`cancel` stops the running one.
 
-    Raises :class:`SourceError` with every source's reason if none works.
+    Each command runs in its own process group (a terminal's Ctrl-C does
+    not reach it; a timeout or :meth:`cancel` kills the whole group), so a
+    scan can be abandoned from another thread at any moment.
     """
-    reasons = []
-    for name in sources:
+
+    def __init__(self, timeout=20.0):
+        self.timeout = timeout
+        self._lock = threading.Lock()
+        self._proc = None
+        self._cancelled = False
+
+    def cancel(self):
+        """Kill the running command; every later read fails at once."""
+        with self._lock:
+            self._cancelled = True
+            if self._proc is not None:
+                _kill_group(self._proc)
+
+    def read(self, name, iface):
+        """Run one source; return its readings or raise SourceError."""
+        command, parse = SOURCES[name]
+        argv = command(iface)
+        with self._lock:
+            if self._cancelled:
+                raise SourceError('stopped')
+            try:
+                self._proc = subprocess.Popen(
+                    argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                    stdin=subprocess.DEVNULL, text=True,
+                    start_new_session=True)
+            except FileNotFoundError:
+                raise SourceError(f'{argv[0]} is not installed') from None
+            proc = self._proc
         try:
-            return name, read_source(name, iface, timeout)
-        except SourceError as exc:
-            reasons.append(f'{name}: {exc}')
-    raise SourceError('; '.join(reasons) or 'no source configured')
+            out, err = proc.communicate(timeout=self.timeout)
+        except subprocess.TimeoutExpired:
+            _kill_group(proc)
+            proc.communicate()
+            raise SourceError(f'{" ".join(argv)} took more than '
+                              f'{self.timeout:g} s') from None
+        finally:
+            with self._lock:
+                self._proc = None
+        if self._cancelled:
+            raise SourceError('stopped')
+        if proc.returncode != 0:
+            reason = (err.strip() or out.strip() or
+                      f'exit code {proc.returncode}').splitlines()[-1]
+            raise SourceError(f'{" ".join(argv)}: {reason}')
+        readings = parse(out)
+        if not readings and out.strip():
+            raise SourceError(f'{" ".join(argv)}: output had no readable AP')
+        return readings
+
+    def scan(self, sources, iface):
+        """
+        Try ``sources`` in order; return (source name, readings).
+
+        Raises :class:`SourceError` with every source's reason if none works.
+        """
+        reasons = []
+        for name in sources:
+            try:
+                return name, self.read(name, iface)
+            except SourceError as exc:
+                reasons.append(f'{name}: {exc}')
+        raise SourceError('; '.join(reasons) or 'no source configured')
+
+
+def _kill_group(proc):
+    """Kill ``proc`` and every process of its group (e.g. a shell's)."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass

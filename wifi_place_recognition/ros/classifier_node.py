@@ -9,7 +9,7 @@ never imported. Each scan is processed in the subscription callback. The
 subscription keeps one scan (KEEP_LAST, depth 1): a scan that arrives while
 another is processed replaces any still waiting, so the newest is processed
 next; the gaps in the publisher's sequence numbers count the replaced ones
-as dropped.
+as dropped (:class:`.sequence.PublisherGaps`).
 """
 
 import copy
@@ -25,12 +25,15 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 
 from ..core.artifact import load_model, ModelFileError
 from .runner import names_the_node, run
+from .sequence import PublisherGaps
 from ..core.recognizer import OK, PlaceRecognizer, WARN
 from ..core.resources import default_model_path
 from ..core.scan import REJECT_REASONS, ScanRejected
+from ..core.tracking import DEFAULT_TIMEOUT
 
 LEVELS = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN}
 THROTTLE_S = 5.0
@@ -95,12 +98,23 @@ class ClassifierNode(Node):
                 description='scans listing more APs are rejected',
                 integer_range=[IntegerRange(
                     from_value=1, to_value=1000000, step=1)])).value
+        tracking = self.declare_parameter(
+            'tracking', True, ParameterDescriptor(
+                description='answer with the building/floor tracked over '
+                            'the scans (false: each scan alone)')).value
+        self.tracking_timeout = self.declare_parameter(
+            'tracking_timeout', DEFAULT_TIMEOUT, ParameterDescriptor(
+                description='seconds between scans (header.stamp) after '
+                            'which the tracked belief restarts',
+                floating_point_range=[FloatingPointRange(
+                    from_value=1.0, to_value=1e6)])).value
 
         self.model_path = model_path
         model = load_model(model_path)
         self.recognizer = PlaceRecognizer(
             model, min_confidence, min_known_aps, max_aps,
             make_forward(model) if make_forward else None)
+        self.recognizer.track(tracking, self.tracking_timeout)
         self.prob_keys = [f'prob/{n}' for n in
                           self.recognizer.model.class_names]
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -108,7 +122,7 @@ class ClassifierNode(Node):
 
         self.status_name = f'{self.get_name()}: place'
         self.counts = Counter(received=0, answered=0, rejected=0, dropped=0)
-        self._last_sequence = None
+        self._gaps = PublisherGaps()
         self.last_latency_ms = math.nan
         self.place_pub = self.create_publisher(
             DiagnosticArray, '~/place',
@@ -119,6 +133,7 @@ class ClassifierNode(Node):
             JointState, 'wifi/scan', self._on_scan, SCAN_QOS,
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.create_timer(1.0, self._publish_health)
+        self.create_service(Trigger, '~/reset', self._on_reset)
         provenance = self.recognizer.model.provenance
         self.get_logger().info(
             f'model {model_path}: {len(self.recognizer.model.ap_ids)} APs, '
@@ -128,9 +143,10 @@ class ClassifierNode(Node):
     # parameters -----------------------------------------------------------
     def _validate_parameters(self, params):
         for p in params:
-            if p.name == 'min_confidence' and not math.isfinite(p.value):
+            if p.name in ('min_confidence', 'tracking_timeout') and \
+                    not math.isfinite(p.value):
                 return SetParametersResult(
-                    successful=False, reason='min_confidence must be finite')
+                    successful=False, reason=f'{p.name} must be finite')
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params):
@@ -141,36 +157,39 @@ class ClassifierNode(Node):
                 self.recognizer.min_known_aps = p.value
             elif p.name == 'max_aps':
                 self.recognizer.mapper.max_aps = p.value
+            elif p.name == 'tracking':
+                self.recognizer.track(p.value, self.tracking_timeout)
+            elif p.name == 'tracking_timeout':
+                self.tracking_timeout = p.value
+                if self.recognizer.tracker is not None:
+                    self.recognizer.tracker.timeout = p.value
+
+    def _on_reset(self, request, response):
+        tracker = self.recognizer.tracker
+        if tracker is None:
+            response.message = 'tracking is off: nothing to reset'
+        else:
+            tracker.reset()
+            response.message = 'tracked belief cleared: the next scan ' \
+                               'starts afresh'
+        response.success = True
+        self.get_logger().info(response.message)
+        return response
 
     # scans ----------------------------------------------------------------
     def _on_scan(self, msg, info):
         received_at = time.perf_counter()
-        self._count_replaced(info['publication_sequence_number'])
-        self.counts['received'] += 1
+        replaced = self._gaps.missed(self._scan_sub, info)
+        self.counts['received'] += 1 + replaced
+        self.counts['dropped'] += replaced
         self._process(msg, received_at)
-
-    def _count_replaced(self, sequence):
-        """
-        Count the scans the publisher sent since its last one as dropped.
-
-        DDS numbers each publisher's messages; with the depth-1 queue a gap
-        is the scans that a newer one replaced (or, best-effort, lost on
-        the way). Counted while one publisher is matched: the numbers of two
-        publishers cannot be told apart.
-        """
-        last, self._last_sequence = self._last_sequence, sequence
-        if last is None or sequence is None or sequence <= last + 1:
-            return          # the first scan, none missed, or a new publisher
-        if self._scan_sub.get_publisher_count() == 1:
-            missed = sequence - last - 1
-            self.counts['received'] += missed
-            self.counts['dropped'] += missed
 
     def _process(self, msg, received_at):
         status = DiagnosticStatus(name=self.status_name,
                                   hardware_id=msg.header.frame_id)
         try:
-            place = self.recognizer.classify(msg.name, msg.position)
+            place = self.recognizer.classify(
+                msg.name, msg.position, self._scan_time(msg.header.stamp))
         except ScanRejected as exc:
             self._reject(status, exc.reason, str(exc))
         except Exception as exc:  # never let one scan stop the node
@@ -182,6 +201,9 @@ class ClassifierNode(Node):
             status.values = [
                 _kv('building', place.building), _kv('floor', place.floor),
                 _kv('confidence', f'{place.confidence:.6f}'),
+                _kv('scan_building', place.scan_building),
+                _kv('scan_floor', place.scan_floor),
+                _kv('scan_confidence', f'{place.scan_confidence:.6f}'),
                 _kv('known_aps', place.known_aps),
                 _kv('unknown_aps', place.unknown_aps),
                 _kv('clipped_rssi', place.clipped),
@@ -194,6 +216,12 @@ class ClassifierNode(Node):
         out.header.stamp = msg.header.stamp
         self.place_pub.publish(out)
         self.diag_pub.publish(out)
+
+    def _scan_time(self, stamp):
+        """Return the scan's time (s): its stamp, or now when unset."""
+        if stamp.sec or stamp.nanosec:
+            return stamp.sec + stamp.nanosec * 1e-9
+        return self.get_clock().now().nanoseconds * 1e-9
 
     def _reject(self, status, reason, detail):
         self.counts['rejected'] += 1

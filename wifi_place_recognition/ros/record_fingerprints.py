@@ -6,21 +6,33 @@ fingerprint format ``train_model`` reads) with the current ``building`` and
 ``floor`` parameters as labels. Change them at runtime as the robot moves
 (``ros2 param set /record_fingerprints floor 2``); -1 pauses recording.
 Progress (scans per building/floor) is logged and published on
-``/diagnostics``.
+``/diagnostics``, with the scans received, those with no usable reading,
+the readings left out and the scans lost before they reached the node.
+
+The subscription is best effort (it must match the scanner's sensor-data
+publisher) with a deep queue: rewriting a large file for a new AP can take
+a second, and the scans arriving meanwhile wait instead of being lost.
 """
 
+from collections import Counter
+import copy
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
 from .runner import names_the_node, run
 from ..data.recording import FingerprintLog, RecordingError
+from .sequence import PublisherGaps
 
 PROGRESS_EVERY = 20
+THROTTLE_S = 10.0
+SCAN_QOS = copy.copy(qos_profile_sensor_data)
+SCAN_QOS.depth = 1000
 
 
 def _label(description):
@@ -45,31 +57,46 @@ class RecordFingerprintsNode(Node):
         self.declare_parameter('building', -1, _label('building label'))
         self.declare_parameter('floor', -1, _label('floor label'))
         self.log = FingerprintLog(output)
-        self.paused = 0
+        self.counts = Counter(scans_received=0, scans_paused=0,
+                              scans_unusable=0, scans_lost=0,
+                              skipped_readings=0)
+        self._gaps = PublisherGaps()
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
-        self.create_subscription(JointState, 'wifi/scan', self._on_scan,
-                                 qos_profile_sensor_data)
+        self._scan_sub = self.create_subscription(
+            JointState, 'wifi/scan', self._on_scan, SCAN_QOS,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.create_timer(1.0, self._publish_progress)
         self.get_logger().info(
             f'recording to {output} ({sum(self.log.counts.values())} scans '
             f'already there, {len(self.log.ap_ids)} APs)')
 
-    def _on_scan(self, msg):
+    def _on_scan(self, msg, info):
+        self.counts['scans_lost'] += self._gaps.missed(self._scan_sub, info)
+        self.counts['scans_received'] += 1
         building = self.get_parameter('building').value
         floor = self.get_parameter('floor').value
         if building < 0 or floor < 0:
-            self.paused += 1
+            self.counts['scans_paused'] += 1
             self.get_logger().warn('not recording: set the building and '
                                    'floor parameters',
-                                   throttle_duration_sec=10.0)
+                                   throttle_duration_sec=THROTTLE_S)
             return
         if len(msg.name) != len(msg.position):
+            self.counts['scans_unusable'] += 1
             self.get_logger().warn('scan skipped: name and position differ '
-                                   'in length', throttle_duration_sec=10.0)
+                                   'in length', throttle_duration_sec=THROTTLE_S)
             return
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        self.log.add(msg.name, msg.position, building, floor, stamp)
+        recorded, skipped = self.log.add(msg.name, msg.position, building,
+                                         floor, stamp)
+        self.counts['skipped_readings'] += skipped
+        if not recorded:
+            self.counts['scans_unusable'] += 1
+            self.get_logger().warn('scan skipped: no usable reading (RSSI '
+                                   'not finite or implausible, or a bad AP '
+                                   'name)', throttle_duration_sec=THROTTLE_S)
+            return
         n = self.log.counts[(building, floor)]
         if n % PROGRESS_EVERY == 0:
             self.get_logger().info(f'building {building}, floor {floor}: '
@@ -86,8 +113,8 @@ class RecordFingerprintsNode(Node):
             hardware_id=str(self.log.path),
             values=[KeyValue(key=f'scans/B{b}F{f}', value=str(n))
                     for (b, f), n in counts] +
-            [KeyValue(key='aps', value=str(len(self.log.ap_ids))),
-             KeyValue(key='paused_scans', value=str(self.paused))])]
+            [KeyValue(key='aps', value=str(len(self.log.ap_ids)))] +
+            [KeyValue(key=k, value=str(n)) for k, n in self.counts.items()])]
         self.diag_pub.publish(out)
 
 

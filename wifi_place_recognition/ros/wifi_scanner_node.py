@@ -1,15 +1,21 @@
 """
 ``wifi_scanner_node``: the robot's WiFi interface as ``wifi/scan`` messages.
 
-Every ``period`` seconds it reads a scan from the first working source of
-``sources`` (``iw`` triggers a scan, ``iw_dump`` reads the kernel's cached
-results, ``nmcli`` asks NetworkManager; see :mod:`.wifi_sources`) and
+Every ``period`` seconds a worker thread reads a scan from the first working
+source of ``sources`` (``iw`` triggers a scan, ``iw_dump`` reads the
+kernel's cached results, ``nmcli`` asks NetworkManager; see
+:mod:`..data.wifi_sources`), drops readings older than ``max_age`` and
 publishes a ``sensor_msgs/JointState`` (name = BSSID, position = RSSI dBm,
-frame_id = interface). No interface, no permission or a missing tool gives an
-ERROR status on ``/diagnostics`` with the reason; it keeps retrying.
+frame_id = interface). The scan commands run off the executor, so
+parameters and the 1 Hz status on ``/diagnostics`` stay responsive while a
+command hangs (up to its timeout). No interface, no permission or a missing
+tool gives an ERROR status with the reason; it keeps retrying.
 """
 
+from collections import Counter
 import sys
+import threading
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
@@ -17,8 +23,9 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
+from ..data.wifi_sources import (drop_stale, SOURCES, SourceError,
+                                 SourceRunner, wireless_interfaces)
 from .runner import names_the_node, run
-from ..data.wifi_sources import scan, SOURCES, SourceError, wireless_interfaces
 
 THROTTLE_S = 30.0
 
@@ -34,7 +41,7 @@ class WifiScannerNode(Node):
                 description='wireless interface; empty: the first one '
                             'found in /sys/class/net',
                 read_only=True)).value
-        period = self.declare_parameter(
+        self.period = self.declare_parameter(
             'period', 2.0, ParameterDescriptor(
                 description='seconds between scans', read_only=True,
                 floating_point_range=[FloatingPointRange(
@@ -43,51 +50,111 @@ class WifiScannerNode(Node):
             'sources', ['iw', 'iw_dump', 'nmcli'], ParameterDescriptor(
                 description=f'tried in order; any of {sorted(SOURCES)}',
                 read_only=True)).value)
+        self.max_age = self.declare_parameter(
+            'max_age', 0.0, ParameterDescriptor(
+                description='readings of APs last seen longer ago (s) are '
+                            'dropped; 0: period + the scan command\'s run '
+                            'time',
+                floating_point_range=[FloatingPointRange(
+                    from_value=0.0, to_value=3600.0)])).value
         unknown = [s for s in self.sources if s not in SOURCES]
         if unknown or not self.sources:
             raise ValueError(f'unknown scan sources {unknown}; use any of '
                              f'{sorted(SOURCES)}')
-        self.timeout = min(period * 5, 30.0)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self.runner = SourceRunner(timeout=min(self.period * 5, 30.0))
         self.pub = self.create_publisher(JointState, 'wifi/scan',
                                          qos_profile_sensor_data)
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
-        self.scans = 0
-        self.create_timer(period, self._scan_once)
+        self.counts = Counter(scans_published=0, stale_readings=0,
+                              failed_scans=0)
+        self._lock = threading.Lock()
+        self._result = (DiagnosticStatus.WARN, 'no scan yet', '')
+        self._running_since = None
+        self._stop = threading.Event()
+        self.create_timer(1.0, self._publish_status)
+        self._worker = threading.Thread(target=self._scan_loop,
+                                        name='wifi_scan', daemon=True)
+        self._worker.start()
+
+    def _apply_parameters(self, params):
+        for p in params:
+            if p.name == 'max_age':
+                self.max_age = p.value
+
+    # the worker thread ----------------------------------------------------
+    def _scan_loop(self):
+        due = time.monotonic()
+        while not self._stop.wait(max(0.0, due - time.monotonic())):
+            due = max(due + self.period, time.monotonic())
+            self._scan_once()
 
     def _scan_once(self):
         iface = self.interface or next(iter(wireless_interfaces()), '')
         stamp = self.get_clock().now().to_msg()
+        started = time.monotonic()
+        with self._lock:
+            self._running_since = started
         try:
             if not iface:
                 raise SourceError('no wireless interface found')
-            source, readings = scan(self.sources, iface, self.timeout)
+            source, readings = self.runner.scan(self.sources, iface)
         except SourceError as exc:
-            self._status(DiagnosticStatus.ERROR, f'no scan: {exc}', iface)
+            if self._stop.is_set():
+                return      # cancelled: the node is shutting down
+            self._finish(DiagnosticStatus.ERROR, f'no scan: {exc}', iface,
+                         failed_scans=1)
             self.get_logger().error(f'no scan: {exc}',
                                     throttle_duration_sec=THROTTLE_S)
             return
+        max_age = self.max_age or self.period + time.monotonic() - started
+        readings, stale = drop_stale(readings, max_age)
+        old = f' ({stale} older than {max_age:.1f} s dropped)' if stale \
+            else ''
         if not readings:
-            self._status(DiagnosticStatus.WARN, f'{source}: no AP in range',
-                         iface)
+            self._finish(DiagnosticStatus.WARN,
+                         f'{source}: no AP in range{old}', iface,
+                         stale_readings=stale)
             return
-        msg = JointState(name=[b for b, _ in readings],
-                         position=[r for _, r in readings])
+        msg = JointState(name=[r.bssid for r in readings],
+                         position=[r.dbm for r in readings])
         msg.header.stamp = stamp
         msg.header.frame_id = iface
         self.pub.publish(msg)
-        self.scans += 1
-        self._status(DiagnosticStatus.OK,
-                     f'{len(readings)} APs from {source}', iface)
+        self._finish(DiagnosticStatus.OK,
+                     f'{len(readings)} APs from {source}{old}', iface,
+                     scans_published=1, stale_readings=stale)
 
-    def _status(self, level, message, iface):
+    def _finish(self, level, message, iface, **counts):
+        with self._lock:
+            self.counts.update(counts)
+            self._result = (level, message, iface)
+            self._running_since = None
+
+    def destroy_node(self):
+        """Stop the worker (killing a running scan command), then the node."""
+        self._stop.set()
+        self.runner.cancel()
+        self._worker.join()
+        super().destroy_node()
+
+    # the executor ---------------------------------------------------------
+    def _publish_status(self):
+        with self._lock:
+            level, message, iface = self._result
+            counts = dict(self.counts)
+            since = self._running_since
+        running = time.monotonic() - since if since is not None else 0.0
         out = DiagnosticArray()
         out.header.stamp = self.get_clock().now().to_msg()
         out.status = [DiagnosticStatus(
             level=level, name=f'{self.get_name()}: scanner', message=message,
             hardware_id=iface or 'none',
-            values=[KeyValue(key='scans_published', value=str(self.scans)),
-                    KeyValue(key='sources', value=','.join(self.sources))])]
+            values=[KeyValue(key=k, value=str(v)) for k, v in counts.items()]
+            + [KeyValue(key='scan_running_s', value=f'{running:.1f}'),
+               KeyValue(key='max_age_s', value=f'{self.max_age:g}'),
+               KeyValue(key='sources', value=','.join(self.sources))])]
         self.diag_pub.publish(out)
 
 
