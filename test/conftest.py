@@ -62,17 +62,22 @@ def mac(i):
     return 'AA:BB:CC:00:%02X:%02X' % (i // 256, i % 256)
 
 
-def synthetic_csv(path, scans_per_class=60, n_aps=24, seed=0, phones=4):
+def synthetic_csv(path, scans_per_class=60, n_aps=24, seed=0, phones=4,
+                  scans_seed=None):
     """
     Write a generic fingerprint CSV: 2 buildings x 2 floors, MAC columns.
 
     Each class has its own strong APs; every scan draws RSSI around them.
+    ``seed`` draws the building and, unless ``scans_seed`` is given, the
+    scans: another ``scans_seed`` gives new scans of the same building.
     """
     rng = np.random.default_rng(seed)
     classes = [(0, 0), (0, 1), (1, 0), (1, 1)]
     centres = rng.uniform(-95, -40, size=(len(classes), n_aps))
     for k in range(len(classes)):
         centres[k, rng.choice(n_aps, n_aps // 2, replace=False)] = np.nan
+    if scans_seed is not None:
+        rng = np.random.default_rng(scans_seed)
     lines = [','.join([mac(i) for i in range(n_aps)]
                       + ['FLOOR', 'BUILDINGID', 'PHONEID'])]
     for k, (b, f) in enumerate(classes):
