@@ -90,6 +90,33 @@ def synthetic_csv(path, scans_per_class=60, n_aps=24, seed=0, phones=4,
     return path
 
 
+def surveyed_csv(path, scans_per_floor=200, n_aps=30, seed=0, phones=4):
+    """
+    Write a generic CSV with X, Y: one building, 2 floors of 40 m x 40 m.
+
+    APs stand at random places on either floor; RSSI falls with distance
+    (log-distance path loss, 12 dB more through the floor), so the
+    position can be learned from the scan.
+    """
+    rng = np.random.default_rng(seed)
+    ap_xy = rng.uniform(0, 40, (n_aps, 2))
+    ap_floor = rng.integers(0, 2, n_aps)
+    lines = [','.join([mac(i) for i in range(n_aps)]
+                      + ['X', 'Y', 'FLOOR', 'BUILDINGID', 'PHONEID'])]
+    for floor in (0, 1):
+        for s in range(scans_per_floor):
+            xy = rng.uniform(0, 40, 2)
+            d = np.linalg.norm(ap_xy - xy, axis=1) + 1.0
+            rssi = -30 - 25 * np.log10(d) - 12 * (ap_floor != floor) \
+                + rng.normal(0, 2, n_aps)
+            cells = ['100' if v < -85 else str(int(round(v))) for v in rssi]
+            lines.append(','.join(cells + [f'{xy[0] - 7600:.2f}',
+                                           f'{xy[1] + 4864900:.2f}',
+                                           str(floor), '0', str(s % phones)]))
+    Path(path).write_text('\n'.join(lines) + '\n')
+    return path
+
+
 FAST = ['--sae-layers', '32,16', '--classifier-layers', '16',
         '--sae-epochs', '3', '--epochs', '15', '--batch-size', '32',
         '--folds', '2', '--ensemble', '1', '--quiet']

@@ -3,18 +3,19 @@
 import csv
 import json
 
-from conftest import dataset_file, FAST, python_module, run, synthetic_csv
+from conftest import (dataset_file, FAST, python_module, run, surveyed_csv,
+                      synthetic_csv)
 import numpy as np
 import pytest
 import torch
-from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.core.artifact import load_model, save_model
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from fuzz import hostile_model_files
 from wifi_place_recognition.core.metrics import class_index
 from wifi_place_recognition.core.model import mean_softmax, ScanForward
 from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.selection import grouped_folds
-from wifi_place_recognition.training.trainer import train
+from wifi_place_recognition.training.trainer import R95, train
 
 SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
              epochs=15, batch_size=32, ensemble=1)
@@ -201,3 +202,39 @@ def test_evaluate_model_bad_inputs_exit_2_without_traceback(
         assert message in result.stderr
         assert 'Traceback' not in result.stderr
     assert not (tmp_path / 'PWNED').exists()
+
+
+# position -------------------------------------------------------------------
+
+def test_position_head_learns_xy_and_round_trips_the_model_file(tmp_path):
+    fp = read_fingerprints(surveyed_csv(tmp_path / 'a.csv'))
+    test = read_fingerprints(surveyed_csv(tmp_path / 'b.csv', seed=0,
+                                          scans_per_floor=60))
+    config = TrainConfig(sae_layers=(32, 16), classifier_layers=(16,),
+                         position_layers=(32,), sae_epochs=3, epochs=30,
+                         batch_size=32, ensemble=2, folds=2)
+    model, nets, report = train(fp, config, log=lambda s: None)
+    save_model(model, tmp_path / 'm.npz')
+    loaded = load_model(tmp_path / 'm.npz')
+    assert loaded.position.columns == ('X', 'Y')
+    np.testing.assert_array_equal(loaded.position.origin,
+                                  fp.position.mean(axis=0))
+    proba, xy, sigma = loaded.locate(test.rssi)
+    error = np.linalg.norm(xy - test.position, axis=1)
+    # scans spread over 40 m x 40 m floors: guessing the middle is ~15 m off
+    assert error.mean() < 6.0, error.mean()
+    assert report.selection['position_mean_error_m'] < 8.0
+    assert 0.85 <= (error <= R95 * sigma).mean() <= 1.0
+    forward = ScanForward(loaded)
+    for row, p_row, xy_row in zip(test.rssi[:20], proba, xy):
+        p_one, head = forward.outputs(row)
+        np.testing.assert_allclose(p_one, p_row, atol=1e-5)
+        np.testing.assert_allclose(loaded.position.to_metres(head), xy_row,
+                                   atol=1e-3)
+
+
+def test_a_classifier_only_model_refuses_to_locate(synthetic):
+    model = load_model(synthetic[1])
+    assert model.position is None
+    with pytest.raises(ValueError, match='no position output'):
+        model.locate(np.full((1, len(model.ap_ids)), -60.0))

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_write
-from .model import ACTIVATIONS, Layer, PlaceModel
+from .model import ACTIVATIONS, Layer, PlaceModel, PositionHead
 from .preprocessing import RssiScaler
 from .tracking import TrackingParams
 
@@ -42,16 +42,8 @@ def _digest(header, arrays):
 def save_model(model, path):
     """Write ``model`` to ``path`` atomically."""
     arrays = dict(model.scaler.arrays())
-    members = []
-    for m, layers in enumerate(model.members):
-        specs = []
-        for i, layer in enumerate(layers):
-            name = f'member{m}.layer{i}'
-            arrays[f'{name}.weight'] = layer.weight.astype(np.float32)
-            arrays[f'{name}.bias'] = layer.bias.astype(np.float32)
-            specs.append({'weight': f'{name}.weight', 'bias': f'{name}.bias',
-                          'activation': layer.activation})
-        members.append(specs)
+    members = [_layer_specs(layers, f'member{m}.layer', arrays)
+               for m, layers in enumerate(model.members)]
     header = {'format': FORMAT, 'schema_version': SCHEMA_VERSION,
               'ap_ids': list(model.ap_ids),
               'classes': np.asarray(model.classes).tolist(),
@@ -59,10 +51,31 @@ def save_model(model, path):
               'provenance': model.provenance}
     if model.tracking is not None:
         header['tracking'] = model.tracking.to_dict()
+    if model.position is not None:
+        pos = model.position
+        arrays['position.sigma'] = np.asarray(pos.sigma, np.float32)
+        header['position'] = {
+            'origin': [float(v) for v in pos.origin],
+            'scale': float(pos.scale), 'trunk': int(pos.trunk),
+            'columns': list(pos.columns), 'units': 'm',
+            'heads': [_layer_specs(head, f'member{m}.position', arrays)
+                      for m, head in enumerate(pos.heads)]}
     header['sha256'] = _digest(header, arrays)
     arrays['header'] = np.frombuffer(json.dumps(header).encode(), np.uint8)
     with atomic_write(path) as f:
         np.savez(f, **arrays)
+
+
+def _layer_specs(layers, prefix, arrays):
+    """Put ``layers``' arrays into ``arrays``; return their header specs."""
+    specs = []
+    for i, layer in enumerate(layers):
+        name = f'{prefix}{i}'
+        arrays[f'{name}.weight'] = layer.weight.astype(np.float32)
+        arrays[f'{name}.bias'] = layer.bias.astype(np.float32)
+        specs.append({'weight': f'{name}.weight', 'bias': f'{name}.bias',
+                      'activation': layer.activation})
+    return specs
 
 
 def load_model(path):
@@ -143,12 +156,13 @@ def _build(header, arrays):
             raise ModelFileError(f'{name} has shape {arrays[name].shape}, '
                                  f'expected ({len(ap_ids)},) for '
                                  f'{len(ap_ids)} APs')
-    members = [_member(specs, arrays, len(ap_ids), len(classes))
+    members = [_layers(specs, arrays, len(ap_ids), len(classes))
                for specs in header['members']]
     if not members:
         raise ModelFileError('the model has no network')
     return PlaceModel(ap_ids, scaler, members, classes,
-                      header.get('provenance', {}), _tracking(header))
+                      header.get('provenance', {}), _tracking(header),
+                      _position(header, arrays, members, len(classes)))
 
 
 def _tracking(header):
@@ -161,7 +175,33 @@ def _tracking(header):
         raise ModelFileError(f'tracking section: {exc}') from None
 
 
-def _member(specs, arrays, n_inputs, n_classes):
+def _position(header, arrays, members, n_classes):
+    """Return the optional position head (None: a classifier only)."""
+    if 'position' not in header:
+        return None
+    spec = header['position']
+    origin = np.asarray(spec['origin'], np.float64)
+    trunk, scale = spec['trunk'], spec['scale']
+    if origin.shape != (2,) or not np.isfinite(origin).all() or \
+            not (isinstance(scale, float) and scale > 0):
+        raise ModelFileError('position: origin must be two finite numbers '
+                             'and scale a positive number')
+    if not isinstance(trunk, int) or not \
+            all(0 < trunk < len(layers) for layers in members) or \
+            len(spec['heads']) != len(members):
+        raise ModelFileError('position: trunk and heads do not fit the '
+                             'networks')
+    heads = [_layers(head, arrays, layers[trunk - 1].weight.shape[0], 2)
+             for head, layers in zip(spec['heads'], members)]
+    sigma = arrays['position.sigma']
+    if sigma.shape != (n_classes,) or not (sigma > 0).all():
+        raise ModelFileError(f'position.sigma must be {n_classes} positive '
+                             f'values, one per class')
+    return PositionHead(origin, scale, trunk, heads, sigma,
+                        tuple(spec['columns']))
+
+
+def _layers(specs, arrays, n_inputs, n_outputs):
     layers, width = [], n_inputs
     for spec in specs:
         w, b = arrays[spec['weight']], arrays[spec['bias']]
@@ -172,7 +212,7 @@ def _member(specs, arrays, n_inputs, n_classes):
                                  f'{w.shape}, expected (*, {width})')
         layers.append(Layer(w, b, spec['activation']))
         width = w.shape[0]
-    if width != n_classes:
-        raise ModelFileError(f'a network has {width} outputs but there are '
-                             f'{n_classes} classes')
+    if width != n_outputs:
+        raise ModelFileError(f'a network has {width} outputs, expected '
+                             f'{n_outputs}')
     return layers

@@ -43,6 +43,36 @@ class Layer:
 
 
 @dataclass
+class PositionHead:
+    """
+    X, Y in metres from each member's encoder output, with a sigma.
+
+    Each member's first ``trunk`` layers (its encoder) feed ``heads[m]``,
+    whose two outputs are ``(xy - origin) / scale``; the position is the
+    mean over members. ``sigma[c]`` (metres, per predicted class c) was
+    calibrated on held-out scans so that the circle of radius 2.45 sigma
+    (a 95 % circle for a 2-D Gaussian) holds 95 % of them.
+    """
+
+    origin: np.ndarray            # float64 (2,): metres, in ``columns``
+    scale: float                  # metres per network output unit
+    trunk: int                    # member layers shared with the classes
+    heads: list                   # per member: list of Layer -> 2 outputs
+    sigma: np.ndarray             # float32 (k,): metres per class
+    columns: tuple = ('X', 'Y')   # the data's coordinate columns
+
+    def to_metres(self, outputs):
+        """Return float64 positions from mean head outputs (..., 2)."""
+        return self.origin + self.scale * np.asarray(outputs, np.float64)
+
+
+def _run(x, layers):
+    for layer in layers:
+        x = ACTIVATIONS[layer.activation](x @ layer.weight.T + layer.bias)
+    return x
+
+
+@dataclass
 class PlaceModel:
     """
     Scaler + networks of dense layers + softmax over (building, floor).
@@ -57,23 +87,31 @@ class PlaceModel:
     classes: np.ndarray           # int64 (k, 2): building, floor per output
     provenance: dict = field(default_factory=dict)
     tracking: object = None       # TrackingParams from the file, or None
+    position: PositionHead = None  # None: a classifier only
 
-    def predict_proba(self, rssi):
-        """Return class probabilities, shape (n, k), for (n, n_aps) RSSI."""
+    def outputs(self, rssi):
+        """Return (probabilities (n, k), position head outputs or None)."""
         rssi = np.asarray(rssi, dtype=np.float32)
         if rssi.ndim != 2 or rssi.shape[1] != len(self.ap_ids):
             raise ValueError(f'expected RSSI of shape (n, {len(self.ap_ids)})'
                              f' (one column per model AP), got shape '
                              f'{rssi.shape}')
         inputs = self.scaler.transform(rssi)
-        return mean_softmax([self._logits(inputs, layers)
-                             for layers in self.members])
+        logits, places = [], []
+        for m, layers in enumerate(self.members):
+            if self.position is None:
+                logits.append(_run(inputs, layers))
+                continue
+            trunk = self.position.trunk
+            encoded = _run(inputs, layers[:trunk])
+            logits.append(_run(encoded, layers[trunk:]))
+            places.append(_run(encoded, self.position.heads[m]))
+        return mean_softmax(logits), (np.mean(places, axis=0)
+                                      if places else None)
 
-    @staticmethod
-    def _logits(x, layers):
-        for layer in layers:
-            x = ACTIVATIONS[layer.activation](x @ layer.weight.T + layer.bias)
-        return x
+    def predict_proba(self, rssi):
+        """Return class probabilities, shape (n, k), for (n, n_aps) RSSI."""
+        return self.outputs(rssi)[0]
 
     def predict(self, rssi):
         """Return (building, floor, confidence, probabilities) arrays."""
@@ -81,6 +119,19 @@ class PlaceModel:
         best = proba.argmax(axis=1)
         return (self.classes[best, 0], self.classes[best, 1],
                 proba[np.arange(len(best)), best], proba)
+
+    def locate(self, rssi):
+        """
+        Return (class probabilities, xy metres (n, 2), sigma metres (n,)).
+
+        Raises ValueError for a model without a position head.
+        """
+        if self.position is None:
+            raise ValueError('this model has no position output (it was '
+                             'trained without coordinates)')
+        proba, heads = self.outputs(rssi)
+        return (proba, self.position.to_metres(heads),
+                self.position.sigma[proba.argmax(axis=1)].astype(np.float64))
 
     @property
     def class_names(self):
@@ -107,20 +158,41 @@ class ScanForward:
                        layers[0].bias + layers[0].weight @ self.blank,
                        ACTIVATIONS[layers[0].activation])
                       for layers in model.members]
-        self.rest = [[(np.ascontiguousarray(layer.weight.T), layer.bias,
-                       ACTIVATIONS[layer.activation]) for layer in layers[1:]]
+        self.rest = [[self._prepared(layer) for layer in layers[1:]]
                      for layers in model.members]
+        position = model.position
+        self.trunk = position.trunk if position else 0
+        self.heads = [[self._prepared(layer) for layer in head]
+                      for head in position.heads] if position else []
+
+    @staticmethod
+    def _prepared(layer):
+        return (np.ascontiguousarray(layer.weight.T), layer.bias,
+                ACTIVATIONS[layer.activation])
 
     def __call__(self, rssi):
         """Return class probabilities (k,) for one (n_aps,) RSSI vector."""
+        return self.outputs(rssi)[0]
+
+    def outputs(self, rssi):
+        """Return (probabilities (k,), the position head's 2 outputs or None)."""
         columns = np.flatnonzero(~np.isnan(rssi))
         delta = self.model.scaler.transform(rssi[columns], columns) - \
             self.blank[columns]
-        logits = []
-        for (first_t, first_bias, first_act), rest in zip(self.first,
-                                                          self.rest):
+        logits, places = [], []
+        for m, ((first_t, first_bias, first_act), rest) in enumerate(
+                zip(self.first, self.rest)):
             x = first_act(first_bias + delta @ first_t[columns])
-            for weight_t, bias, activation in rest:
+            for done, (weight_t, bias, activation) in enumerate(rest, 1):
+                if done == self.trunk:
+                    places.append(self._head(x, self.heads[m]))
                 x = activation(x @ weight_t + bias)
             logits.append(x)
-        return mean_softmax(logits)
+        return mean_softmax(logits), (sum(places) / len(places)
+                                      if places else None)
+
+    @staticmethod
+    def _head(x, layers):
+        for weight_t, bias, activation in layers:
+            x = activation(x @ weight_t + bias)
+        return x
