@@ -1,5 +1,13 @@
-"""The two install layouts: colcon (what ``ros2 run`` execs) and ``pip install``."""
+"""
+The install layouts: colcon, ``pip install .`` and the source checkout.
 
+Each finds the shipped model by itself: colcon through its environment
+script (``AMENT_PREFIX_PATH``), ``pip install .`` and the source checkout
+with no ROS environment variable at all.
+"""
+
+import ast
+import json
 import os
 from pathlib import Path
 import shutil
@@ -7,17 +15,22 @@ import sys
 import sysconfig
 
 from conftest import REPO, run
+import numpy as np
 import pytest
 from ros_helpers import Client, NodeProcess
+from wifi_place_recognition.core.artifact import load_model
 
 PROBE = (['WAP001', 'WAP002', 'WAP003', 'WAP004'], [-60.0, -70.0, -80.0, -50.0])
+SHIPPED = Path('share', 'wifi_place_recognition', 'models', 'ujiindoorloc.npz')
 
 
-def _answer_from_installed(ros, tmp_path, executable, prefix, site):
-    """Start an installed node with only the install on the path; probe it."""
-    env = dict(os.environ, AMENT_PREFIX_PATH=str(prefix),
-               PYTHONPATH=os.pathsep.join(
-                   [str(site), os.environ.get('PYTHONPATH', '')]))
+def _without(*names):
+    """Return this process's environment less the variables ``names``."""
+    return {k: v for k, v in os.environ.items() if k not in names}
+
+
+def _answer_from_installed(ros, tmp_path, executable, prefix, env):
+    """Start an installed node on its default model; probe it."""
     proc = NodeProcess(tmp_path, [str(executable)], 'installed_node', env=env)
     client = Client(ros, 'installed_node')
     try:
@@ -27,7 +40,7 @@ def _answer_from_installed(ros, tmp_path, executable, prefix, site):
         code, log = proc.stop()
     assert code == 0, log
     # The shipped model was found in the install's share directory.
-    assert f'{prefix}/share/wifi_place_recognition/models/' in log, log
+    assert f'model {prefix / SHIPPED}:' in log, log
     return status
 
 
@@ -46,25 +59,73 @@ def test_colcon_installed_executable_answers(ros, tmp_path):
     for name in ('models/ujiindoorloc.npz', 'package.xml',
                  'config/classifier_node.yaml', 'launch/classifier.launch.py'):
         assert (prefix / 'share' / 'wifi_place_recognition' / name).exists()
+    # What `source install/setup.bash` sets for this package.
     site = next(prefix.glob('lib/python3*/site-packages'))
+    env = dict(os.environ, AMENT_PREFIX_PATH=str(prefix),
+               PYTHONPATH=str(site))
     assert status_ok(_answer_from_installed(ros, tmp_path, executable,
-                                            prefix, site))
+                                            prefix, env))
 
 
-def test_pip_installed_console_script_answers(ros, tmp_path):
-    prefix = tmp_path / 'prefix'
+def _labelled_csv(path, model, rows=20, seed=0):
+    """Write scans labelled with ``model``'s own answers; return the path."""
+    rng = np.random.default_rng(seed)
+    rssi = np.full((rows, len(model.ap_ids)), np.nan)
+    for row in rssi:
+        row[rng.choice(len(row), 8, replace=False)] = rng.integers(-95, -40, 8)
+    building, floor, _, _ = model.predict(rssi)
+    lines = [','.join(model.ap_ids + ('BUILDINGID', 'FLOOR'))]
+    lines += [','.join(['100' if np.isnan(v) else str(int(v)) for v in row]
+                       + [str(b), str(f)])
+              for row, b, f in zip(rssi, building, floor)]
+    path.write_text('\n'.join(lines) + '\n')
+    return path
+
+
+def test_pip_install_in_a_fresh_venv_needs_no_ros_variables(ros, tmp_path):
+    venv = tmp_path / 'venv'
     source = tmp_path / 'source'  # pip builds in the tree: use a copy
     shutil.copytree(REPO, source, ignore=shutil.ignore_patterns(
         '.venv', '.git', 'build', 'install', 'log', '*.egg-info'))
-    # --ignore-installed: without it pip removes this venv's own install.
-    result = run([sys.executable, '-m', 'pip', 'install', '--no-deps',
-                  '--ignore-installed', '--no-build-isolation', '--prefix',
-                  str(prefix), str(source)])
+    env = _without('AMENT_PREFIX_PATH', 'PYTHONPATH')
+    result = run([sys.executable, '-m', 'venv', '--without-pip', venv])
+    assert result.returncode == 0, result.stderr
+    python = venv / 'bin' / 'python'
+    site = run([python, '-c', 'import sysconfig; '
+                'print(sysconfig.get_path("purelib"))'], env=env).stdout
+    # The dependencies (numpy, rclpy and the messages, setuptools to build)
+    # come from this test's environment; the package is installed anew.
+    Path(site.strip(), 'dependencies.pth').write_text(
+        sysconfig.get_path('purelib') + '\n')
+    result = run([sys.executable, '-m', 'pip', '--python', python, 'install',
+                  '--no-deps', '--no-build-isolation', source], env=env,
+                 cwd=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
-    site = Path(sysconfig.get_path(
-        'purelib', vars={'base': str(prefix), 'platbase': str(prefix)}))
+
+    where = run([python, '-c', 'import wifi_place_recognition as p; '
+                 'from wifi_place_recognition.core.resources import '
+                 'default_model_path; print(p.__file__, default_model_path())'],
+                env=env, cwd=tmp_path)
+    assert where.returncode == 0, where.stderr
+    package, model_path = where.stdout.split()
+    assert Path(package).is_relative_to(venv), package
+    assert Path(model_path) == venv / SHIPPED
+    model = load_model(REPO / 'models' / 'ujiindoorloc.npz')
+    data = _labelled_csv(tmp_path / 'scans.csv', model)
+    evaluated = run([venv / 'bin' / 'evaluate_model', '--data', data,
+                     '--json'], env=env, cwd=tmp_path)
+    assert evaluated.returncode == 0, evaluated.stderr
+    assert json.loads(evaluated.stdout)['building_floor_accuracy'] == 1.0
     assert status_ok(_answer_from_installed(
-        ros, tmp_path, prefix / 'bin' / 'classifier_node', prefix, site))
+        ros, tmp_path, venv / 'bin' / 'classifier_node', venv, env))
+
+
+def test_source_checkout_uses_its_models_folder(tmp_path):
+    result = run([sys.executable, '-c', 'from wifi_place_recognition.core.'
+                  'resources import default_model_path as d; print(d())'],
+                 env=_without('AMENT_PREFIX_PATH'), cwd=tmp_path)
+    assert result.stdout.strip() == str(REPO / 'models' / 'ujiindoorloc.npz'), \
+        result.stderr
 
 
 def status_ok(status):
@@ -72,6 +133,28 @@ def status_ok(status):
     return status.message.startswith('building ')
 
 
-def test_launch_file_is_valid_python():
-    source = (REPO / 'launch' / 'classifier.launch.py').read_text()
-    compile(source, 'classifier.launch.py', 'exec')
+def _calls(tree, name):
+    return [node for node in ast.walk(tree) if isinstance(node, ast.Call)
+            and getattr(node.func, 'id', None) == name]
+
+
+def test_launch_file_declares_described_arguments_it_uses():
+    # launch and launch_ros are not on PyPI: check the file's structure.
+    tree = ast.parse((REPO / 'launch' / 'classifier.launch.py').read_text())
+    declared = {}
+    for call in _calls(tree, 'DeclareLaunchArgument'):
+        kwargs = {k.arg: k.value for k in call.keywords}
+        name = call.args[0].value
+        assert isinstance(kwargs.get('description'), ast.Constant) and \
+            len(kwargs['description'].value) > 20, name
+        assert 'default_value' in kwargs, name
+        declared[name] = kwargs['default_value']
+    used = {call.args[0].value for call in _calls(tree, 'LaunchConfiguration')}
+    assert set(declared) == used == {'params_file', 'scan_topic'}
+    assert declared['scan_topic'].value == 'wifi/scan'
+    config = [a.value for a in ast.walk(declared['params_file'])
+              if isinstance(a, ast.Constant)]
+    assert (REPO / config[-2] / config[-1]).is_file(), config
+    node, = _calls(tree, 'Node')
+    kwargs = {k.arg: k.value for k in node.keywords}
+    assert kwargs['executable'].value == 'classifier_node'
