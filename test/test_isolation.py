@@ -5,14 +5,16 @@ import sys
 
 from conftest import DOMAIN_ID, run, TEST_DIR
 import numpy as np
+import pytest
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.core.resources import default_model_path
 
-BLOCKED = ('rclpy', 'torch', 'rcl_interfaces', 'sensor_msgs',
-           'diagnostic_msgs', 'ament_index_python')
+ROS = ('rclpy', 'rcl_interfaces', 'sensor_msgs', 'diagnostic_msgs',
+       'std_srvs', 'ament_index_python')
+TRAINING = ('torch', 'sklearn')
 
-WITHOUT_ROS_AND_TORCH = '''
+IMPORT_AND_CLASSIFY = '''
 import importlib, json, pkgutil, sys
 
 blocked = set(sys.argv[1].split(','))
@@ -25,16 +27,17 @@ class Block:
 
     def find_spec(self, name, path=None, target=None):
         if name.partition('.')[0] in blocked:
-            raise ImportError(f'{name} is blocked (core without ROS/torch)')
+            raise ImportError(f'{name} is blocked in this test')
 
 
 sys.meta_path.insert(0, Block())
 imported = []
-for layer in ('core', 'data'):
-    package = importlib.import_module(f'wifi_place_recognition.{layer}')
-    for info in pkgutil.iter_modules(package.__path__):
+for name in sys.argv[2].split(','):
+    module = importlib.import_module(f'wifi_place_recognition.{name}')
+    imported.append(module.__name__)
+    for info in pkgutil.iter_modules(getattr(module, '__path__', [])):
         imported.append(importlib.import_module(
-            f'{package.__name__}.{info.name}').__name__)
+            f'{module.__name__}.{info.name}').__name__)
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.core.resources import default_model_path
@@ -46,15 +49,23 @@ print(json.dumps({'imported': imported, 'leaked': leaked,
 '''
 
 
-def test_core_and_data_work_without_ros_and_torch():
-    result = run([sys.executable, '-c', WITHOUT_ROS_AND_TORCH,
-                  ','.join(BLOCKED)])
+@pytest.mark.parametrize('blocked, imports, some', [
+    # the core and fingerprint I/O: no ROS, no torch
+    (ROS + TRAINING, ('core', 'data'),
+     ('core.recognizer', 'core.model', 'data.fingerprints')),
+    # what a robot runs: the nodes and the tools that need no training
+    (TRAINING, ('core', 'data', 'ros', 'cli.evaluate_model',
+                'cli.replay_scans'),
+     ('ros.classifier_node', 'ros.record_fingerprints', 'cli.replay_scans')),
+], ids=['core without ROS and torch', 'nodes without torch and sklearn'])
+def test_imports_and_classifies_with_packages_blocked(blocked, imports, some):
+    result = run([sys.executable, '-c', IMPORT_AND_CLASSIFY, ','.join(blocked),
+                  ','.join(imports)])
     assert result.returncode == 0, result.stderr
     out = json.loads(result.stdout)
     assert out['leaked'] == []
-    assert {'wifi_place_recognition.core.recognizer',
-            'wifi_place_recognition.core.model',
-            'wifi_place_recognition.data.fingerprints'} <= set(out['imported'])
+    assert {f'wifi_place_recognition.{m}' for m in some} <= \
+        set(out['imported'])
     # The same answer as with everything importable.
     model = load_model(default_model_path())
     place = PlaceRecognizer(model).classify(model.ap_ids[:6], [-60.0] * 6)
