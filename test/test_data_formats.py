@@ -276,9 +276,9 @@ def test_offline_mapping_is_the_nodes_mapping(synthetic):
     a, b = model.ap_ids[0], model.ap_ids[1]
     dashed = a.upper().replace(':', '-')
     rssi = np.array([[-40, np.nan, -70], [np.nan, -55, np.nan],
-                     [-80, -60, np.nan]], np.float32)
-    fp = Fingerprints((dashed, a.lower(), b), rssi, np.zeros(3, np.int64),
-                      np.zeros(3, np.int64))
+                     [-60, -80, np.nan], [-80, -60, np.nan]], np.float32)
+    fp = Fingerprints((dashed, a.lower(), b), rssi, np.zeros(4, np.int64),
+                      np.zeros(4, np.int64))
     offline = align(model, fp)
     mapper = ScanMapper(model.ap_ids)
     for row, mapped in zip(fp.rssi, offline):
@@ -286,10 +286,11 @@ def test_offline_mapping_is_the_nodes_mapping(synthetic):
         names = [n for n, s in zip(fp.ap_ids, seen) if s]
         np.testing.assert_array_equal(mapped, mapper.map(names,
                                                          row[seen]).rssi)
-    assert offline[:, 0].tolist() == [-40, -55, -60]
+    assert offline[:, 0].tolist() == [-40, -55, -60, -60]
 
     read = parse(f'{dashed},{a.lower()},{b},FLOOR,BUILDINGID\n'
-                 f'-40,100,-70,0,0\n100,-55,100,0,0\n-80,-60,100,1,0\n')
+                 f'-40,100,-70,0,0\n100,-55,100,0,0\n-60,-80,100,1,0\n'
+                 f'-80,-60,100,1,0\n')
     assert read.ap_ids == (dashed, b)
     assert 'merged, the strongest reading wins' in read.notes[0]
     np.testing.assert_array_equal(align(model, read), offline)
