@@ -18,9 +18,12 @@ setup(
     ],
     python_requires='>=3.10',
     install_requires=['setuptools', 'numpy'],
+    # The node needs numpy only; torch trains (train_model), scikit-learn
+    # runs the benchmark baselines; requirements.txt is the development set.
     extras_require={
-        'train': ['torch', 'scikit-learn'],
-        'test': ['pytest'],
+        'train': ['torch'],
+        'bench': ['torch', 'scikit-learn'],
+        'test': ['pytest', 'flake8', 'pydocstyle', 'torch'],
     },
     zip_safe=True,
     maintainer='wifi_place_recognition developers',

@@ -7,12 +7,14 @@ with no ROS environment variable at all.
 """
 
 import ast
+import ast
 import json
 import os
 from pathlib import Path
 import shutil
 import sys
 import sysconfig
+from xml.etree import ElementTree
 
 from conftest import REPO, run
 import numpy as np
@@ -126,6 +128,55 @@ def test_source_checkout_uses_its_models_folder(tmp_path):
                  env=_without('AMENT_PREFIX_PATH'), cwd=tmp_path)
     assert result.stdout.strip() == str(REPO / 'models' / 'ujiindoorloc.npz'), \
         result.stderr
+
+
+#: Python module -> rosdep key, where they differ.
+ROSDEP_KEYS = {'numpy': 'python3-numpy', 'torch': 'python3-torch',
+               'sklearn': 'python3-sklearn'}
+
+
+def _imported(files, lazy=True):
+    """
+    Return the rosdep keys of what ``files`` import (not stdlib, not us).
+
+    ``lazy=False``: only the imports at module level, which every use needs
+    (not those inside functions: optional features).
+    """
+    keys = set()
+    for path in files:
+        tree = ast.parse(path.read_text())
+        nodes = ast.walk(tree) if lazy else tree.body
+        for node in nodes:
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [node.module]
+            else:
+                continue
+            for name in names:
+                top = name.partition('.')[0]
+                if top not in sys.stdlib_module_names and \
+                        top != 'wifi_place_recognition':
+                    keys.add(ROSDEP_KEYS.get(top, top))
+    return keys
+
+
+def test_package_xml_declares_what_runs_and_nothing_else():
+    root = ElementTree.parse(REPO / 'package.xml').getroot()
+    declared = {tag: {e.text for e in root.iter(tag)}
+                for tag in ('depend', 'exec_depend', 'test_depend')}
+    run_deps = declared['depend'] | declared['exec_depend']
+    package = REPO / 'wifi_place_recognition'
+    training = set(package.glob('training/*.py'))
+    runs = (set(package.rglob('*.py')) - training) | \
+        set(REPO.glob('launch/*.py'))
+    # The nodes, the tools and the launch file: all they always import is
+    # declared, and nothing they never import.
+    assert _imported(runs, lazy=False) <= run_deps
+    assert run_deps <= _imported(runs)
+    # Training needs torch on top: a test (and pip extra) dependency.
+    assert _imported(training, lazy=False) - run_deps == {'python3-torch'}
+    assert 'python3-torch' in declared['test_depend'] - run_deps
 
 
 def status_ok(status):
