@@ -16,8 +16,15 @@ def generate_launch_description():
         DeclareLaunchArgument(
             'params_file',
             default_value=os.path.join(share, 'config',
-                                       'classifier_node.yaml')),
-        DeclareLaunchArgument('scan_topic', default_value='wifi/scan'),
+                                       'classifier_node.yaml'),
+            description='YAML file with the parameters of classifier_node '
+                        '(model_path, thresholds: see the README); the '
+                        'default is the package\'s file of the defaults'),
+        DeclareLaunchArgument(
+            'scan_topic', default_value='wifi/scan',
+            description='topic of the WiFi scans (sensor_msgs/JointState: '
+                        'name = BSSID, position = RSSI dBm), remapped to '
+                        'the node\'s wifi/scan'),
         Node(package='wifi_place_recognition', executable='classifier_node',
              name='classifier_node',
              parameters=[LaunchConfiguration('params_file')],

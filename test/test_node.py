@@ -133,6 +133,44 @@ def test_clean_shutdown(ros, synthetic, tmp_path, sig):
     assert 'Traceback' not in log
 
 
+BAD_START = [
+    ('classifier_node', ['-p', 'min_confidence:=2.0'], 'classifier_node',
+     "min_confidence out of range"),
+    ('classifier_node', ['-p', 'min_known_aps:=abc'], 'classifier_node',
+     "'min_known_aps' to 'abc' of type 'STRING'"),
+    ('classifier_node', ['--params-file', 'PARAMS'], 'classifier_node',
+     'min_confidence out of range'),
+    ('classifier_node', ['-r', '__node:=robot_cls', '-p', 'max_aps:=0'],
+     'robot_cls', 'max_aps out of range'),
+    ('wifi_scanner_node', ['-p', 'period:=0.0'], 'wifi_scanner_node',
+     'period out of range'),
+    ('wifi_scanner_node', ['-p', 'sources:=[iw, wext]'], 'wifi_scanner_node',
+     "unknown scan sources ['wext']"),
+    ('record_fingerprints', ['-p', 'floor:=-2'], 'record_fingerprints',
+     'floor out of range'),
+    ('classifier_node', ['-p'], 'classifier_node', "trailing -p flag"),
+]
+
+
+@pytest.mark.parametrize('module, args, logger, reason', BAD_START)
+def test_a_bad_start_up_parameter_is_one_error_line(tmp_path, module, args,
+                                                    logger, reason):
+    params = tmp_path / 'params.yaml'
+    params.write_text('classifier_node:\n  ros__parameters:\n'
+                      '    min_confidence: 1.5\n')
+    args = [str(params) if a == 'PARAMS' else a for a in args]
+    if module == 'record_fingerprints':
+        args += ['-p', f'output:={tmp_path / "rec.csv"}']
+    result = run(python_module(f'ros.{module}', '--ros-args', *args),
+                 timeout=30)
+    assert result.returncode == 1, result.stderr
+    ours = [line for line in result.stderr.splitlines()
+            if not line.startswith('[ERROR] [') or '[rcl]' not in line]
+    assert len(ours) == 1, result.stderr
+    assert f'] [{logger}]: cannot start: ' in ours[0], result.stderr
+    assert reason in ours[0], result.stderr
+
+
 def test_bad_and_hostile_model_files_are_one_clear_error(synthetic, tmp_path):
     marker = tmp_path / 'PWNED'
     files = hostile_model_files(synthetic[1], tmp_path, marker)
@@ -166,8 +204,10 @@ def test_params_file_is_read(ros, tmp_path):
 
 def test_closed_loop_matches_evaluate_model(tmp_path):
     data = dataset_file('validationData-public.csv')
-    proc = NodeProcess(tmp_path, python_module('ros.classifier_node'),
-                       'classifier_node')
+    # single-scan answers, as evaluate_model's (tracking: test_tracking_node)
+    proc = NodeProcess(tmp_path, python_module(
+        'ros.classifier_node', '--ros-args', '-p', 'tracking:=false'),
+        'classifier_node')
     try:
         # Lockstep: a long wait per scan costs nothing while answers come.
         replay = run(python_module('cli.replay_scans', '--data', data,

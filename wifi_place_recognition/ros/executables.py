@@ -26,6 +26,18 @@ def catch_stop_signals():
         signal.signal(sig, _request_stop)
 
 
+def ignore_stop_signals():
+    """
+    Ignore SIGINT/SIGTERM from now on: the process is exiting.
+
+    Python's finalization resets Python-level handlers to the default
+    action (an ignored signal it leaves alone), and the DDS teardown after
+    it takes about half a second: a late signal would kill the process.
+    """
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
+
+
 def stop_requested():
     """Return True once a stop signal arrived."""
     return bool(_requests)

@@ -5,7 +5,9 @@ rclpy's own signal handlers are not installed: SIGINT and SIGTERM only
 request a stop (see :mod:`.executables`), so a signal never shuts the
 context down under a running executor, and a repeated one is a no-op. The
 spin loop notices the request within ``POLL_S``, then destroys the node and
-shuts the context down itself.
+shuts the context down itself. From then on the signals are ignored: the
+interpreter's teardown (about half a second of DDS clean-up) would otherwise
+die of a late one.
 """
 
 import contextlib
@@ -18,7 +20,8 @@ from rclpy.exceptions import NameValidationException, ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from .executables import catch_stop_signals, stop_requested
+from .executables import (catch_stop_signals, ignore_stop_signals,
+                          stop_requested)
 
 POLL_S = 0.1
 
@@ -52,9 +55,17 @@ def run(make_node, args=None, startup_errors=(ValueError,)):
 
     A bad parameter, or a ``startup_errors`` exception, while constructing
     the node (a bad model file, a missing output) is logged as one line and
-    gives exit code 1.
+    gives exit code 1. After it returns, SIGINT and SIGTERM are ignored: the
+    process is exiting.
     """
     catch_stop_signals()
+    try:
+        return _run(make_node, args, startup_errors)
+    finally:
+        ignore_stop_signals()
+
+
+def _run(make_node, args, startup_errors):
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RuntimeError as exc:     # malformed --ros-args
