@@ -77,9 +77,9 @@ class ScanMapper:
         reading.
         """
         known = cols >= 0
-        rssi = np.asarray(rssi, np.float32)[..., known]
+        rssi = np.asarray(rssi, np.float32)
         vector = np.full(rssi.shape[:-1] + (self.size,), np.nan, np.float32)
-        np.fmax.at(vector.T, cols[known], rssi.T)
+        np.fmax.at(vector.T, cols[known], rssi.T[known])   # APs first
         return vector
 
     def map_rows(self, names, rssi):
