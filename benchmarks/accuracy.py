@@ -1,212 +1,336 @@
 """
-Accuracy benchmark: SAE variants and baselines, several seeds, one run.
+Accuracy benchmark: the default and the paper's recipe against k-NN and a
+random forest, several seeds, one run; or a cross-validated search.
 
-Protocol: train on ``--train`` (UJIIndoorLoc trainingData.csv), select on
-whole phones held out from it (PHONEID), report accuracy on ``--test``
-(validationData-public.csv). The test file is only ever evaluated, never
-used to choose. Prints a table (mean and min-max over seeds) and writes JSON.
+Protocol (``--suite default``, ``table1``, ``architecture``): each recipe is
+trained by the documented command (``train_model``, in a subprocess whose
+wall time and peak memory are measured) on the dataset's training part and
+evaluated by ``evaluate_model`` on its test part. Everything the recipe
+chooses (the epoch count, k and the representation of k-NN) is chosen by
+grouped cross-validation on the training part: whole devices
+(UJIIndoorLoc PHONEID) or whole walks (WiFine files). The test part is only
+ever evaluated. Prints a table (mean and min-max over seeds) and writes
+JSON.
 
-    python benchmarks/accuracy.py --train T.csv --test V.csv [--suite S]
+``--suite search`` runs only the cross-validation of each variant (no test
+file at all): the selection log of benchmarks/README.md comes from it.
 
-Suites: ``default`` (the default model against 1-NN, k-NN and a random
-forest), ``table1`` (the paper's Table 1 input treatments),
-``architecture`` (the paper's network comparison), ``search`` (ideas
-beyond the paper, for the selection log).
+    python benchmarks/accuracy.py --dataset ujiindoorloc --suite default
+    python benchmarks/accuracy.py --dataset wifine --suite default
 """
 
 import argparse
 import json
+import os
 from pathlib import Path
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 
 import numpy as np
 from sklearn.ensemble import RandomForestClassifier
-from sklearn.neighbors import KNeighborsClassifier
+from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
 from wifi_place_recognition.core.atomic import atomic_write  # noqa: E402
-from wifi_place_recognition.data.fingerprints import read_fingerprints  # noqa
-from wifi_place_recognition.core.metrics import accuracies  # noqa: E402
+from wifi_place_recognition.core.evaluation import (  # noqa: E402
+    position_errors)
+from wifi_place_recognition.core.metrics import (  # noqa: E402
+    accuracies, class_index)
+from wifi_place_recognition.core.preprocessing import RssiScaler  # noqa
+from wifi_place_recognition.core.scan import ScanMapper  # noqa: E402
+from wifi_place_recognition.data.fingerprints import (  # noqa: E402
+    read_fingerprints, ReaderOptions)
+from wifi_place_recognition.training.config import (  # noqa: E402
+    PAPER, TrainConfig)
+from wifi_place_recognition.training.selection import (  # noqa: E402
+    grouped_folds)
 from wifi_place_recognition.training.trainer import (  # noqa: E402
-    PAPER, split_validation, train, TrainConfig)
+    cross_validate)
 
-PAPER_FIGURES = {'SAE default (paper: 0.92)': 0.92,
-                 '1-NN raw, 100 = missing (paper: 0.75)': 0.75}
+WIFINE_OPTIONS = dict(floor_column='floorID', building_column=None,
+                      not_detected_marker=-100.0,
+                      meta_columns=('num_visible_APs', 'z'))
+WIFINE_ARGS = ['--floor-column', 'floorID', '--building-column', 'none',
+               '--not-detected-marker', '-100', '--meta-columns',
+               'num_visible_APs,z']
+DATASETS = {
+    'ujiindoorloc': dict(train=['ujiindoorloc/trainingData.csv'],
+                         test=['ujiindoorloc/validationData-public.csv'],
+                         options={}, args=[]),
+    'wifine': dict(train=['wifine/train'], test=['wifine/test'],
+                   options=WIFINE_OPTIONS, args=WIFINE_ARGS),
+}
 
-AUG = dict(augment_offset=10.0, augment_gain=0.1, augment_noise=2.0,
-           augment_dropout=0.1)
-AUG_EXP = dict(PAPER, **AUG, representation='exponential')
+
+def _flags(overrides):
+    out = []
+    for key, value in overrides.items():
+        flag = '--' + key.replace('_', '-')
+        if isinstance(value, tuple):
+            value = ','.join(map(str, value))
+        out += [flag, str(value)]
+    return out
+
+
+PAPER_FLAGS = _flags(PAPER)
 SUITES = {
     'default': {
-        'default (augment + exponential + refit)': {},
+        'default': [],
+        'paper recipe (one network, dBm, no augmentation)': PAPER_FLAGS,
     },
     'table1': {
-        'missing 100, per-AP scaling': dict(PAPER, not_detected=100.0,
-                                            scaling='independent'),
-        'missing 100, joint scaling': dict(PAPER, not_detected=100.0),
-        'missing -110, per-AP scaling': dict(PAPER, scaling='independent'),
-        'missing -110, joint scaling': PAPER,
+        'missing 100, per-AP scaling': PAPER_FLAGS + _flags(dict(
+            not_detected=100.0, scaling='independent')),
+        'missing 100, joint scaling': PAPER_FLAGS + _flags(dict(
+            not_detected=100.0)),
+        'missing -110, per-AP scaling': PAPER_FLAGS + _flags(dict(
+            scaling='independent')),
+        'missing -110, joint scaling': PAPER_FLAGS,
     },
     'architecture': {
-        'FC 256-128-64-128-128 (no SAE)': dict(PAPER, sae_epochs=0),
-        'FC 256-128 (no SAE)': dict(PAPER, sae_epochs=0, sae_layers=(256,),
-                                    classifier_layers=(128,)),
-        'SAE 256 + 128-128': dict(PAPER, sae_layers=(256,)),
-        'SAE 256-128 + 128-128': dict(PAPER, sae_layers=(256, 128)),
-        'SAE 256-128-64 + 128-128': PAPER,
-    },
-    'search': {
-        'paper default': PAPER,
-        'augment (offset 10, gain .1, noise 2, drop .1)': dict(PAPER, **AUG),
-        'powed': dict(PAPER, representation='powed'),
-        'exponential': dict(PAPER, representation='exponential'),
-        'augment + powed': dict(PAPER, **AUG, representation='powed'),
-        'augment + exponential': dict(PAPER, **AUG,
-                                      representation='exponential'),
-        'augment, no SAE': dict(PAPER, **AUG, sae_epochs=0),
-        'augment, dropout .5': dict(PAPER, **AUG, dropout=0.5),
-    },
-    'search3': {
-        'augment + exponential, EMA 4 epochs': dict(AUG_EXP, ema_epochs=4),
-        'augment + exponential, EMA 4 epochs, lr 3e-4': dict(
-            AUG_EXP, ema_epochs=4, learning_rate=3e-4),
-    },
-    'search2': {
-        'augment + exponential, ensemble 3': dict(AUG_EXP, ensemble=3),
-        'augment + exponential, ensemble 3, refit': dict(AUG_EXP, ensemble=3,
-                                                         refit=True),
-        'augment + exponential, no SAE': dict(AUG_EXP, sae_epochs=0),
-        'stronger augment + exponential': dict(
-            AUG_EXP, augment_offset=15.0, augment_gain=0.2,
-            augment_noise=3.0, augment_dropout=0.2),
+        'SAE 256 + 128-128': PAPER_FLAGS + ['--sae-layers', '256'],
+        'SAE 256-128 + 128-128': PAPER_FLAGS + ['--sae-layers', '256,128'],
+        'SAE 256-128-64 + 128-128': PAPER_FLAGS,
+        'no SAE pre-training': PAPER_FLAGS + ['--sae-epochs', '0'],
     },
 }
 
 
-def _fill(rssi, value):
-    return np.where(np.isnan(rssi), value, rssi)
+def _measured(argv):
+    """Run ``argv``; return (CompletedProcess-like, seconds, peak MiB)."""
+    start = time.perf_counter()
+    with tempfile.TemporaryFile('w+') as out, \
+            tempfile.TemporaryFile('w+') as err:
+        proc = subprocess.Popen(argv, stdout=out, stderr=err,
+                                env=os.environ.copy())
+        _, status, usage = os.wait4(proc.pid, 0)
+        seconds = time.perf_counter() - start
+        out.seek(0)
+        err.seek(0)
+        stdout, stderr = out.read(), err.read()
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f'{" ".join(map(str, argv))} failed:\n{stderr}')
+    return stdout, seconds, usage.ru_maxrss / 1024
 
 
-def sklearn_baselines(train_fp, test_fp, held, seed):
-    """Return {name: (held-out scores, test scores, seconds)}."""
-    models = {
-        '1-NN raw, 100 = missing': (lambda: KNeighborsClassifier(1), 100.0),
-        '5-NN, -110 = missing': (lambda: KNeighborsClassifier(5), -110.0),
-        'random forest (100 trees), -110': (
-            lambda: RandomForestClassifier(100, random_state=seed,
-                                           n_jobs=-1), -110.0),
-    }
-    labels = train_fp.building * 100 + train_fp.floor
+def train_and_test(flags, seed, paths, data, folder):
+    """Train by the documented command; return the test figures."""
+    model = Path(folder) / f'model-{seed}.npz'
+    cli = [sys.executable, '-m', 'wifi_place_recognition.cli.']
+    _, seconds, peak = _measured(
+        [cli[0], cli[1], cli[2] + 'train_model', '--data', *paths['train'],
+         *data['args'], '-o', model, '--seed', str(seed), '--quiet',
+         *flags])
+    stdout, _, _ = _measured(
+        [cli[0], cli[1], cli[2] + 'evaluate_model', '--model', model,
+         '--data', *paths['test'], *data['args'], '--json'])
+    result = json.loads(stdout)
+    result.pop('confusion')
+    result.update(train_seconds=seconds, train_peak_mib=peak)
+    return result
+
+
+def _representations(train, test):
+    for name in ('dbm', 'powed', 'exponential'):
+        scaler = RssiScaler(-110.0, 'joint', name).fit(train.rssi)
+        yield name, scaler.transform(train.rssi), scaler.transform(test)
+
+
+def knn_baselines(train_fp, test_fp, seed, folds=4):
+    """
+    Return {name: test figures} of k-NN and a random forest.
+
+    k (1-11) and the representation of k-NN are chosen by grouped
+    cross-validation on the training data, separately for the class
+    (building+floor accuracy) and the position (mean error).
+    """
+    train_fp = train_fp.subset(~train_fp.empty_rows)
+    classes, y = class_index(train_fp.building, train_fp.floor)
+    split = grouped_folds(train_fp, y, folds, seed=seed).held_out
+    test_rssi = align_rssi(train_fp, test_fp)
+    ks = (1, 3, 5, 7, 11)
+    best_class, best_pos = (-1, None), (np.inf, None)
+    for rep, _, _ in _representations(train_fp, test_rssi):
+        for k in ks:
+            acc, err = [], []
+            for held in split:
+                scaler = RssiScaler(-110.0, 'joint', rep).fit(
+                    train_fp.rssi[~held])
+                x_tr = scaler.transform(train_fp.rssi[~held])
+                x_te = scaler.transform(train_fp.rssi[held])
+                knn = KNeighborsClassifier(k, weights='distance')
+                acc.append((knn.fit(x_tr, y[~held]).predict(x_te)
+                            == y[held]).mean())
+                if train_fp.position is not None:
+                    reg = KNeighborsRegressor(k, weights='distance')
+                    reg.fit(x_tr, train_fp.position[~held])
+                    err.append(np.linalg.norm(
+                        reg.predict(x_te) - train_fp.position[held],
+                        axis=1).mean())
+            if np.mean(acc) > best_class[0]:
+                best_class = (np.mean(acc), (rep, k))
+            if err and np.mean(err) < best_pos[0]:
+                best_pos = (np.mean(err), (rep, k))
     out = {}
-    for name, (make, fill) in models.items():
-        start = time.perf_counter()
-        x = _fill(train_fp.rssi, fill)
-        held_pred = make().fit(x[~held], labels[~held]).predict(x[held])
-        test_pred = make().fit(x, labels).predict(_fill(test_fp.rssi, fill))
-        out[name] = (
-            accuracies(train_fp.building[held], train_fp.floor[held],
-                       held_pred // 100, held_pred % 100),
-            accuracies(test_fp.building, test_fp.floor, test_pred // 100,
-                       test_pred % 100),
-            time.perf_counter() - start)
+    rep, k = best_class[1]
+    scaler = RssiScaler(-110.0, 'joint', rep).fit(train_fp.rssi)
+    x_tr, x_te = scaler.transform(train_fp.rssi), scaler.transform(test_rssi)
+    knn = KNeighborsClassifier(k, weights='distance').fit(x_tr, y)
+    predicted = classes[knn.predict(x_te)]
+    name = f'k-NN (k={k}, {rep}; k/representation by CV)'
+    out[name] = accuracies(test_fp.building, test_fp.floor, predicted[:, 0],
+                           predicted[:, 1])
+    if best_pos[1] is not None:
+        rep, k = best_pos[1]
+        scaler = RssiScaler(-110.0, 'joint', rep).fit(train_fp.rssi)
+        reg = KNeighborsRegressor(k, weights='distance').fit(
+            scaler.transform(train_fp.rssi), train_fp.position)
+        xy = reg.predict(scaler.transform(test_rssi))
+        out[name].update(position_errors(
+            test_fp, predicted[:, 0], predicted[:, 1], xy,
+            np.full(len(xy), np.nan)))
+        del out[name]['position_in_95_ellipse']  # k-NN gives no sigma
+        out[name]['position_knn'] = f'k={k}, {rep}'
+    scaler = RssiScaler(-110.0, 'joint', 'dbm').fit(train_fp.rssi)
+    forest = RandomForestClassifier(100, random_state=seed, n_jobs=1)
+    forest.fit(scaler.transform(train_fp.rssi), y)
+    predicted = classes[forest.predict(scaler.transform(test_rssi))]
+    out['random forest (100 trees, -110 dBm)'] = accuracies(
+        test_fp.building, test_fp.floor, predicted[:, 0], predicted[:, 1])
     return out
 
 
+def align_rssi(train_fp, test_fp):
+    """Return the test scans on the training data's AP columns."""
+    return ScanMapper(train_fp.ap_ids).map_rows(test_fp.ap_ids, test_fp.rssi)
+
+
 def summary(values):
-    """Return mean, min, max of a list."""
+    """Return mean, min, max (and the values) of a list of numbers."""
+    values = [v for v in values if v is not None]
+    if not values:
+        return None
     return {'mean': statistics.fmean(values), 'min': min(values),
-            'max': max(values)}
+            'max': max(values), 'values': values}
+
+
+def search(args, train_fp):
+    """Cross-validate each variant of ``--variants`` (JSON); no test file."""
+    variants = json.loads(Path(args.variants).read_text())
+    train_fp = train_fp.subset(~train_fp.empty_rows)
+    classes, y = class_index(train_fp.building, train_fp.floor)
+    import torch
+    y = torch.from_numpy(y)
+    runs = []
+    for name, overrides in variants.items():
+        for seed in args.seeds:
+            config = TrainConfig(**dict(overrides, seed=seed))
+            start = time.perf_counter()
+            s = cross_validate(train_fp, y, len(classes), config,
+                               log=lambda line: None)
+            curves = np.asarray(s['curves'])
+            runs.append({
+                'variant': name, 'overrides': overrides, 'seed': seed,
+                'cv_accuracy_at_choice': s['accuracy_mean'],
+                'cv_accuracy_plateau': float(curves[:, 1:].mean()),
+                'fold_plateaus': curves[:, 1:].mean(axis=1).tolist(),
+                'epochs': s['epochs'],
+                'position_mean_error_m': s.get('position_mean_error_m'),
+                'seconds': time.perf_counter() - start})
+            r = runs[-1]
+            print(f'{name:40s} seed {seed}: plateau '
+                  f'{r["cv_accuracy_plateau"]:.4f} (folds '
+                  + ' '.join(f'{v:.3f}' for v in r['fold_plateaus'])
+                  + f'), position {r["position_mean_error_m"] or 0:.2f} m, '
+                  f'{r["seconds"]:.0f} s', file=sys.stderr, flush=True)
+    return {'runs': runs}
 
 
 def main():
-    """Run the suite; print the table; write JSON."""
+    """Run a suite; print the table; write JSON."""
     p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    p.add_argument('--train', required=True)
-    p.add_argument('--test', required=True)
-    p.add_argument('--suite', choices=sorted(SUITES), default='default')
-    p.add_argument('--seeds', type=int, nargs='+', default=[0, 1, 2])
-    p.add_argument('--baselines', action=argparse.BooleanOptionalAction,
-                   default=None, help='default: on for the default suite')
+    p.add_argument('--datasets', type=Path,
+                   default=ROOT.parent / 'shared' / 'datasets',
+                   help='folder holding ujiindoorloc/ and wifine/')
+    p.add_argument('--dataset', choices=sorted(DATASETS),
+                   default='ujiindoorloc')
+    p.add_argument('--suite', choices=sorted(SUITES) + ['search'],
+                   default='default')
+    p.add_argument('--variants', help='search: JSON {name: overrides}')
+    p.add_argument('--seeds', type=lambda s: [int(v) for v in s.split(',')],
+                   default=[0, 1, 2])
+    p.add_argument('--no-baselines', action='store_true')
     p.add_argument('--out', type=Path, default=None)
-    p.add_argument('--only', nargs='+', default=None, metavar='N',
-                   help='run only these variants (numbers, from 0)')
-    p.add_argument('--threads', type=int, default=0)
     args = p.parse_args()
-    variants = list(SUITES[args.suite].items())
-    if args.only:
-        variants = [variants[int(i)] for i in args.only]
-    out = args.out or Path(__file__).parent / 'results' / f'{args.suite}.json'
-    train_fp = read_fingerprints(args.train)
-    test_fp = read_fingerprints(args.test, role='test')
+    data = DATASETS[args.dataset]
+    paths = {part: [str(args.datasets / f) for f in data[part]]
+             for part in ('train', 'test')}
+    out = args.out or ROOT / 'benchmarks' / 'results' / \
+        f'{args.dataset}-{args.suite}.json'
+    options = ReaderOptions(**data['options'])
+    train_fp = read_fingerprints(paths['train'], options=options)
+    protocol = {'dataset': args.dataset, 'train': paths['train'],
+                'train_sha256': train_fp.sha256, 'seeds': args.seeds}
+    if args.suite == 'search':
+        result = search(args, train_fp)
+        _write(out, dict(protocol, test=None, **result))
+        return
+    test_fp = read_fingerprints(paths['test'], role='test', options=options)
+    protocol.update(test=paths['test'], test_sha256=test_fp.sha256)
     runs = {}
+    with tempfile.TemporaryDirectory() as folder:
+        for seed in args.seeds:
+            for name, flags in SUITES[args.suite].items():
+                r = train_and_test(flags, seed, paths, data, folder)
+                runs.setdefault(name, []).append(r)
+                print(f'{name} seed {seed}: test building+floor '
+                      f'{r["building_floor_accuracy"]:.4f}, '
+                      f'{r["train_seconds"]:.0f} s, '
+                      f'{r["train_peak_mib"]:.0f} MiB', file=sys.stderr,
+                      flush=True)
+            if args.suite == 'default' and not args.no_baselines:
+                for name, r in knn_baselines(train_fp, test_fp,
+                                             seed).items():
+                    runs.setdefault(name, []).append(r)
+    keys = ('building_floor_accuracy', 'building_accuracy',
+            'floor_accuracy', 'position_mean_error_m',
+            'position_median_error_m', 'position_penalised_mean_error_m',
+            'position_in_95_ellipse', 'train_seconds', 'train_peak_mib')
+    table = {name: {k: summary([r.get(k) for r in rs]) for k in keys}
+             for name, rs in runs.items()}
+    _print_table(protocol, table)
+    _write(out, dict(protocol, table=table, runs=runs))
 
-    def record(name, seed, held_scores, test_scores, seconds):
-        runs.setdefault(name, []).append({
-            'seed': seed, 'held_out': held_scores, 'test': test_scores,
-            'seconds': seconds})
-        print(f'  {name:42s} seed {seed}: held-out '
-              f'{held_scores["building_floor_accuracy"]:.4f}  test '
-              f'{test_scores["building_floor_accuracy"]:.4f}  '
-              f'({seconds:.1f} s)', file=sys.stderr, flush=True)
 
-    for seed in args.seeds:
-        for name, overrides in variants:
-            config = TrainConfig(seed=seed, threads=args.threads,
-                                 **overrides)
-            model, _, report = train(train_fp, config, log=lambda s: None)
-            b, f, _, _ = model.predict(test_fp.rssi)
-            record(name, seed, report.validation,
-                   accuracies(test_fp.building, test_fp.floor, b, f),
-                   report.seconds)
-        if args.baselines or (args.baselines is None and
-                              args.suite == 'default'):
-            held = split_validation(train_fp, TrainConfig(seed=seed))
-            for name, result in sklearn_baselines(
-                    train_fp, test_fp, held, seed).items():
-                record(name, seed, *result)
+def _print_table(protocol, table):
+    print(f'\n{protocol["dataset"]}: train {protocol["train"]}, test '
+          f'{protocol["test"]}, seeds {protocol["seeds"]}; mean (min-max)')
 
-    table = {}
-    for name, seed_runs in runs.items():
-        table[name] = {
-            'held_out_building_floor': summary(
-                [r['held_out']['building_floor_accuracy'] for r in seed_runs]),
-            'test_building_floor': summary(
-                [r['test']['building_floor_accuracy'] for r in seed_runs]),
-            'test_building': summary(
-                [r['test']['building_accuracy'] for r in seed_runs]),
-            'test_floor': summary(
-                [r['test']['floor_accuracy'] for r in seed_runs]),
-            'seconds_median': statistics.median(
-                r['seconds'] for r in seed_runs),
-        }
-    print(f'\ntrain {train_fp.source} ({len(train_fp)} scans), test '
-          f'{test_fp.source} ({len(test_fp)} scans), seeds {args.seeds}')
-    print('building+floor accuracy, mean (min-max) over seeds; held-out = '
-          'whole phones of the training file')
-    print(f'| {"variant":42s} | held-out phones      | test               '
-          f'  | test building | train s |')
-    print(f'|{"-" * 44}|{"-" * 22}|{"-" * 22}|{"-" * 15}|{"-" * 9}|')
-
-    def cell(s):
-        return f'{s["mean"]:.4f} ({s["min"]:.3f}-{s["max"]:.3f})'
+    def cell(s, fmt='.4f'):
+        if s is None:
+            return '-'
+        return f'{s["mean"]:{fmt}} ({s["min"]:{fmt}}-{s["max"]:{fmt}})'
+    print('| method | test building+floor | test building | position mean '
+          'error (m) | penalised (m) | in 95% circle | train s | peak MiB |')
+    print('|---|---|---|---|---|---|---|---|')
     for name, row in table.items():
-        print(f'| {name:42s} | {cell(row["held_out_building_floor"])} | '
-              f'{cell(row["test_building_floor"])} | '
-              f'{row["test_building"]["mean"]:.4f}        | '
-              f'{row["seconds_median"]:7.1f} |')
+        print(f'| {name} | {cell(row["building_floor_accuracy"])} | '
+              f'{cell(row["building_accuracy"])} | '
+              f'{cell(row["position_mean_error_m"], ".2f")} | '
+              f'{cell(row["position_penalised_mean_error_m"], ".2f")} | '
+              f'{cell(row["position_in_95_ellipse"], ".3f")} | '
+              f'{cell(row["train_seconds"], ".0f")} | '
+              f'{cell(row["train_peak_mib"], ".0f")} |')
+
+
+def _write(out, content):
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(out, 'w') as f:
-        json.dump({'protocol': {'train': train_fp.source,
-                                'train_sha256': train_fp.sha256,
-                                'test': test_fp.source,
-                                'test_sha256': test_fp.sha256,
-                                'seeds': args.seeds,
-                                'selection': 'whole phones (PHONEID) held '
-                                             'out of the training file'},
-                   'paper': PAPER_FIGURES, 'table': table, 'runs': runs}, f,
-                  indent=1)
+        json.dump(content, f, indent=1)
     print(f'wrote {out}')
 
 

@@ -12,10 +12,10 @@ from wifi_place_recognition.core.artifact import load_model, save_model
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from fuzz import hostile_model_files
 from wifi_place_recognition.core.metrics import class_index
-from wifi_place_recognition.core.model import mean_softmax, ScanForward
+from wifi_place_recognition.core.model import mean_softmax, R95, ScanForward
 from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.selection import grouped_folds
-from wifi_place_recognition.training.trainer import R95, train
+from wifi_place_recognition.training.trainer import train
 
 SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
              epochs=15, batch_size=32, ensemble=1)
@@ -238,3 +238,34 @@ def test_a_classifier_only_model_refuses_to_locate(synthetic):
     assert model.position is None
     with pytest.raises(ValueError, match='no position output'):
         model.locate(np.full((1, len(model.ap_ids)), -60.0))
+
+
+def test_evaluate_model_reports_position_errors_and_draws(tmp_path):
+    data = surveyed_csv(tmp_path / 'a.csv')
+    test = surveyed_csv(tmp_path / 'b.csv', seed=0, scans_per_floor=40)
+    model = tmp_path / 'model.npz'
+    result = run(python_module(
+        'cli.train_model', '--data', data, '-o', model, *FAST,
+        '--position-layers', '32', '--epochs', '30', '--folds', '2'))
+    assert result.returncode == 0, result.stderr
+    preds, plots = tmp_path / 'pred.csv', tmp_path / 'plots'
+    result = run(python_module(
+        'cli.evaluate_model', '--model', model, '--data', test, '--json',
+        '--predictions', preds, '--plot', plots, '--plot-baseline', data))
+    assert result.returncode == 0, result.stderr
+    scores = json.loads(result.stdout)
+    errors = {k: scores[k] for k in (
+        'position_mean_error_m', 'position_median_error_m',
+        'position_p75_error_m', 'position_p95_error_m',
+        'position_penalised_mean_error_m', 'position_in_95_ellipse')}
+    assert 0 < errors['position_median_error_m'] <= \
+        errors['position_p75_error_m'] <= errors['position_p95_error_m']
+    assert errors['position_mean_error_m'] < 8.0, errors
+    assert errors['position_penalised_mean_error_m'] >= \
+        errors['position_mean_error_m']
+    rows = list(csv.DictReader(preds.open()))
+    assert len(rows) == 80 and {'x', 'y', 'sigma_m'} <= rows[0].keys()
+    assert abs(float(rows[0]['x']) + 7600) < 100  # absolute coordinates
+    assert sorted(p.name for p in plots.iterdir()) == [
+        'confusion.png', 'error_cdf.png', 'map_B0F0.png', 'map_B0F1.png']
+    assert all(p.read_bytes()[:4] == b'\x89PNG' for p in plots.iterdir())

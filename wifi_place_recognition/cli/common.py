@@ -129,6 +129,12 @@ def print_report(result, model, source):
     for key in ('building_accuracy', 'floor_accuracy',
                 'building_floor_accuracy'):
         print(f'  {key.replace("_", " "):24s} {result[key]:.4f}')
+    if 'position_mean_error_m' in result:
+        print('  position error (m)       mean {position_mean_error_m:.2f}, '
+              'median {position_median_error_m:.2f}, 75% '
+              '{position_p75_error_m:.2f}, 95% {position_p95_error_m:.2f}; '
+              'penalised mean {position_penalised_mean_error_m:.2f}; in the '
+              '95% circle {position_in_95_ellipse:.3f}'.format(**result))
     names = result['classes']
     print('confusion (rows: true, columns: predicted)')
     print('      ' + ' '.join(f'{n:>5s}' for n in names))

@@ -17,7 +17,7 @@ from .common import (add_data_arguments, add_download_arguments, main_wrapper,
 def main(argv=None):
     """Evaluate; exit 2 with a message on bad input."""
     p = argparse.ArgumentParser(
-        prog='evaluate_model',
+        allow_abbrev=False, prog='evaluate_model',
         description='Building, floor and building+floor accuracy of a model '
                     'file on a labelled fingerprint CSV.')
     p.add_argument('--model', type=Path, default=None,
@@ -30,6 +30,13 @@ def main(argv=None):
                    help='print one JSON object instead of the report')
     p.add_argument('--predictions', metavar='OUT.csv',
                    help='write one row per input row with the prediction')
+    p.add_argument('--plot', metavar='DIR',
+                   help='write PNG pictures (confusion matrix; with '
+                        'positions the error CDF and a map per floor); '
+                        'needs matplotlib')
+    p.add_argument('--plot-baseline', nargs='+', metavar='PATH',
+                   help='training data for a k-NN regression baseline in '
+                        'the error CDF (needs scikit-learn)')
     add_download_arguments(p)
     add_data_arguments(p)
     args = p.parse_args(argv)
@@ -39,11 +46,28 @@ def main(argv=None):
     predictions = result.pop('predictions')
     if args.predictions:
         write_predictions(args.predictions, fp, predictions)
+    if args.plot:
+        _plot(args, model, fp, result, predictions)
     if args.json:
         print(json.dumps(result))
     else:
         print_report(result, model, fp.source)
     return 0
+
+
+def _plot(args, model, fp, result, predictions):
+    try:
+        from .plots import knn_baseline, plot_evaluation
+        baseline = None
+        if args.plot_baseline and 'position_mean_error_m' in result:
+            train_fp = read_data(args.plot_baseline, args, 'baseline data')
+            baseline = knn_baseline(model, train_fp, fp)
+        paths = plot_evaluation(args.plot, model, fp, result, predictions,
+                                baseline)
+    except ImportError as exc:
+        raise ValueError(f'--plot needs matplotlib (and --plot-baseline '
+                         f'scikit-learn): {exc}') from None
+    print(f'wrote {len(paths)} pictures to {args.plot}', file=sys.stderr)
 
 
 if __name__ == '__main__':

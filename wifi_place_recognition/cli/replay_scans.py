@@ -17,7 +17,7 @@ from .common import (add_data_arguments, add_download_arguments, main_wrapper,
 def main(argv=None):
     """Replay a CSV through a running classifier_node and print accuracy."""
     p = argparse.ArgumentParser(
-        prog='replay_scans',
+        allow_abbrev=False, prog='replay_scans',
         description='Publish the rows of a UJIIndoorLoc-format CSV as WiFi '
                     'scans and report how the classifier node answered.')
     p.add_argument('--data', nargs='+', metavar='PATH',

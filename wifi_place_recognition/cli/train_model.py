@@ -19,7 +19,7 @@ def _layers(text):
 def build_parser():
     """Return the argument parser; training options mirror TrainConfig."""
     p = argparse.ArgumentParser(
-        prog='train_model',
+        allow_abbrev=False, prog='train_model',
         description='Train the SAE + classifier on a fingerprint CSV and '
                     'write the model artifact that classifier_node loads.')
     p.add_argument('--data', nargs='+', metavar='PATH',

@@ -1,7 +1,14 @@
 """Score a model on labelled fingerprints: the offline twin of the node."""
 
+import numpy as np
+
 from .metrics import accuracies, confusion
+from .model import R95
 from .scan import ScanMapper
+
+#: The IPIN 2015 competition's penalties on UJIIndoorLoc (metres).
+WRONG_BUILDING_M = 50.0
+PER_FLOOR_M = 4.0
 
 
 def align(model, fp):
@@ -17,12 +24,49 @@ def align(model, fp):
 
 
 def evaluate(model, fp):
-    """Return accuracies, predictions and the confusion matrix."""
-    building, floor, confidence, _ = model.predict(align(model, fp))
+    """
+    Return accuracies, predictions and the confusion matrix.
+
+    With a position model and coordinates in the data, also the 2-D error
+    figures (:func:`position_errors`). ``predictions`` holds arrays:
+    building, floor, confidence, and x, y, sigma (NaN without a position).
+    """
+    rssi = align(model, fp)
+    if model.position is None:
+        proba = model.predict_proba(rssi)
+        xy, sigma = np.full((len(fp), 2), np.nan), np.full(len(fp), np.nan)
+    else:
+        proba, xy, sigma = model.locate(rssi)
+    best = proba.argmax(axis=1)
+    building, floor = model.classes[best, 0], model.classes[best, 1]
     result = accuracies(fp.building, fp.floor, building, floor)
     result['rows_without_ap'] = int(fp.empty_rows.sum())
     result['confusion'] = confusion(model.classes, fp.building, fp.floor,
                                     building, floor).tolist()
     result['classes'] = model.class_names
-    result['predictions'] = (building, floor, confidence)
+    if model.position is not None and fp.position is not None:
+        result.update(position_errors(fp, building, floor, xy, sigma))
+    result['predictions'] = {
+        'building': building, 'floor': floor,
+        'confidence': proba[np.arange(len(best)), best],
+        'x': xy[:, 0], 'y': xy[:, 1], 'sigma_m': sigma}
     return result
+
+
+def position_errors(fp, building, floor, xy, sigma):
+    """
+    Return the 2-D position error figures (metres) of predictions.
+
+    The penalised mean adds 50 m for a wrong building and 4 m per floor of
+    difference (the IPIN 2015 ranking on UJIIndoorLoc); in-ellipse is the
+    fraction of scans within their 95 % circle (radius 2.45 sigma).
+    """
+    error = np.linalg.norm(xy - fp.position, axis=1)
+    penalised = error + WRONG_BUILDING_M * (building != fp.building) + \
+        PER_FLOOR_M * np.abs(floor - fp.floor)
+    return {'position_mean_error_m': float(error.mean()),
+            'position_median_error_m': float(np.median(error)),
+            'position_p75_error_m': float(np.quantile(error, 0.75)),
+            'position_p95_error_m': float(np.quantile(error, 0.95)),
+            'position_penalised_mean_error_m': float(penalised.mean()),
+            'position_in_95_ellipse': float((error <= R95 * sigma).mean())}

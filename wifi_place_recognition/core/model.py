@@ -24,6 +24,10 @@ ACTIVATIONS = {'relu': _relu, 'elu': _elu, 'linear': _identity,
                'tanh': np.tanh}
 
 
+#: Radius of the 95 % circle of a 2-D isotropic Gaussian, in sigmas.
+R95 = float(np.sqrt(-2 * np.log(0.05)))
+
+
 def mean_softmax(member_logits):
     """Return the mean over members of softmax(logits) along the last axis."""
     total = 0.0

@@ -158,4 +158,5 @@ def summarise(fp, rows, answers):
                'rejected': rejected}
     summary.update(accuracies(fp.building[rows][ok], fp.floor[rows][ok],
                               building[ok], floor[ok]))
-    return summary, (building, floor, confidence)
+    return summary, {'building': building, 'floor': floor,
+                     'confidence': confidence}

@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from ..core.metrics import class_index
-from ..core.model import PlaceModel, PositionHead
+from ..core.model import PlaceModel, PositionHead, R95
 from ..core.preprocessing import RssiScaler
 from ..data.fingerprints import check_trainable
 from .augment import ScanAugmenter
@@ -218,10 +218,6 @@ def cross_validate(fp, y, n_classes, config, log=print):
 #: Mean held-out accuracies this close count as equal when choosing the
 #: epoch count on position error (below the fold-to-fold noise).
 ACCURACY_TIE = 0.002
-
-#: Radius of the 95 % circle of a 2-D isotropic Gaussian, in sigmas.
-R95 = float(np.sqrt(-2 * np.log(0.05)))
-
 
 def _calibrated_sigma(errors, predicted, n_classes, min_scans=30):
     """
