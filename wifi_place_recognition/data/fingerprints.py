@@ -46,7 +46,7 @@ from ..core.scan import normalize_ap_id, ScanMapper
 
 #: UJIIndoorLoc's metadata columns (and the recorder's): never APs.
 META_COLUMNS = ('LONGITUDE', 'LATITUDE', 'FLOOR', 'BUILDINGID', 'SPACEID',
-                'RELATIVEPOSITION', 'USERID', 'PHONEID', 'TIMESTAMP')
+                'RELATIVEPOSITION', 'USERID', 'PHONEID', 'TIMESTAMP', 'FRAME')
 #: Position columns looked for, in this order, unless named.
 POSITION_PAIRS = (('LONGITUDE', 'LATITUDE'), ('X', 'Y'))
 #: ``Fingerprints.meta`` keys of the device and time columns.

@@ -9,30 +9,52 @@ Progress (scans per building/floor) is logged and published on
 ``/diagnostics``, with the scans received, those with no usable reading,
 the readings left out and the scans lost before they reached the node.
 
-The subscription is best effort (it must match the scanner's sensor-data
-publisher) with a deep queue: rewriting a large file for a new AP can take
-a second, and the scans arriving meanwhile wait instead of being lost.
+With ``pose_topic`` (e.g. ``/amcl_pose``), each scan also gets the x, y
+and frame of the pose nearest to it in time (scan and pose ``header.stamp``;
+a zero stamp means the time the node takes the message), if that pose is
+at most ``max_pose_age`` seconds older or newer; other scans are counted
+and skipped.
+
+The scan subscription is best effort (it must match the scanner's
+sensor-data publisher) with a deep queue: rewriting a large file for a new
+AP can take a second, and the scans arriving meanwhile wait instead of
+being lost. The pose subscription is best effort and volatile, so it
+matches reliable and transient-local publishers (AMCL's) as well as
+sensor-data ones.
 """
 
-from collections import Counter
+from collections import Counter, deque
 import copy
+import math
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
+                                ParameterDescriptor)
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data, QoSProfile,
+                       ReliabilityPolicy)
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
 from .runner import names_the_node, run
-from ..data.recording import FingerprintLog, RecordingError
+from ..data.recording import FingerprintLog, frame_problem, RecordingError
 from .sequence import PublisherGaps
 
 PROGRESS_EVERY = 20
 THROTTLE_S = 10.0
 SCAN_QOS = copy.copy(qos_profile_sensor_data)
 SCAN_QOS.depth = 1000
+POSE_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.VOLATILE)
+#: Poses kept to label scans that waited in the queue.
+POSE_HISTORY = 500
+
+
+def _seconds(stamp):
+    """Return a header stamp in seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9
 
 
 def _label(description):
@@ -56,11 +78,32 @@ class RecordFingerprintsNode(Node):
                                  'set')
         self.declare_parameter('building', -1, _label('building label'))
         self.declare_parameter('floor', -1, _label('floor label'))
-        self.log = FingerprintLog(output)
+        pose_topic = self.declare_parameter(
+            'pose_topic', '', ParameterDescriptor(
+                description='geometry_msgs/PoseWithCovarianceStamped topic '
+                'whose x, y label each scan (e.g. /amcl_pose); empty: no '
+                'positions', read_only=True)).value
+        self.declare_parameter('max_pose_age', 2.0, ParameterDescriptor(
+            description='s: the largest time between a scan and the pose '
+            'that labels it', floating_point_range=[FloatingPointRange(
+                from_value=0.0, to_value=3600.0)]))
+        self.log = FingerprintLog(output, positions=bool(pose_topic))
         self.counts = Counter(scans_received=0, scans_paused=0,
                               scans_unusable=0, scans_lost=0,
                               skipped_readings=0)
         self._gaps = PublisherGaps()
+        self._poses = None
+        self._frame = None
+        if pose_topic:
+            self.counts.update(scans_no_fresh_pose=0, poses_received=0,
+                               poses_rejected=0)
+            self._poses = deque(maxlen=POSE_HISTORY)
+            # Created before the scan subscription: the executor then takes
+            # the poses that wait before the scans that wait.
+            self._pose_sub = self.create_subscription(
+                PoseWithCovarianceStamped, pose_topic, self._on_pose,
+                POSE_QOS, qos_overriding_options=QoSOverridingOptions
+                .with_default_policies())
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
         self._scan_sub = self.create_subscription(
@@ -69,7 +112,45 @@ class RecordFingerprintsNode(Node):
         self.create_timer(1.0, self._publish_progress)
         self.get_logger().info(
             f'recording to {output} ({sum(self.log.counts.values())} scans '
-            f'already there, {len(self.log.ap_ids)} APs)')
+            f'already there, {len(self.log.ap_ids)} APs)' + (
+                f', positions from {self._pose_sub.topic_name}'
+                if pose_topic else ''))
+
+    def _time(self, seconds):
+        """Return a stamp's time; zero: the node's clock now."""
+        return seconds or self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_pose(self, msg):
+        self.counts['poses_received'] += 1
+        point = msg.pose.pose.position
+        problem = frame_problem(msg.header.frame_id) or (
+            None if math.isfinite(point.x) and math.isfinite(point.y)
+            else f'x, y = {point.x}, {point.y} is not finite')
+        if problem:
+            self.counts['poses_rejected'] += 1
+            self.get_logger().warn(f'pose ignored: {problem}',
+                                   throttle_duration_sec=THROTTLE_S)
+            return
+        self._poses.append((self._time(_seconds(msg.header.stamp)), point.x,
+                            point.y, msg.header.frame_id))
+
+    def _position(self, stamp):
+        """Return (x, y, frame) of the pose nearest the scan, or None."""
+        t = self._time(stamp)
+        max_age = self.get_parameter('max_pose_age').value
+        if self._poses:
+            nearest = min(self._poses, key=lambda pose: abs(pose[0] - t))
+            if abs(nearest[0] - t) <= max_age:
+                return nearest[1:]
+            why = (f'the nearest pose is {abs(nearest[0] - t):.1f} s '
+                   f'{"older" if nearest[0] < t else "newer"} than the scan '
+                   f'(max_pose_age {max_age:g} s)')
+        else:
+            why = f'no pose yet on {self._pose_sub.topic_name}'
+        self.counts['scans_no_fresh_pose'] += 1
+        self.get_logger().warn(f'scan skipped: {why}',
+                               throttle_duration_sec=THROTTLE_S)
+        return None
 
     def _on_scan(self, msg, info):
         self.counts['scans_lost'] += self._gaps.missed(self._scan_sub, info)
@@ -87,9 +168,14 @@ class RecordFingerprintsNode(Node):
             self.get_logger().warn('scan skipped: name and position differ '
                                    'in length', throttle_duration_sec=THROTTLE_S)
             return
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        stamp = _seconds(msg.header.stamp)
+        position = None
+        if self._poses is not None:
+            position = self._position(stamp)
+            if position is None:
+                return
         recorded, skipped = self.log.add(msg.name, msg.position, building,
-                                         floor, stamp)
+                                         floor, stamp, position)
         self.counts['skipped_readings'] += skipped
         if not recorded:
             self.counts['scans_unusable'] += 1
@@ -97,6 +183,10 @@ class RecordFingerprintsNode(Node):
                                    'not finite or implausible, or a bad AP '
                                    'name)', throttle_duration_sec=THROTTLE_S)
             return
+        if position is not None and position[2] != self._frame:
+            self.get_logger().info(f'positions in frame {position[2]}' + (
+                f' (was {self._frame})' if self._frame else ''))
+            self._frame = position[2]
         n = self.log.counts[(building, floor)]
         if n % PROGRESS_EVERY == 0:
             self.get_logger().info(f'building {building}, floor {floor}: '

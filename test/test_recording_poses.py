@@ -1,0 +1,233 @@
+"""Recording positions: the X, Y, FRAME columns and a pose topic over ROS."""
+
+import math
+import time
+
+from conftest import python_module, run, wait_until
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseWithCovarianceStamped
+import numpy as np
+import pytest
+from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data, QoSProfile,
+                       ReliabilityPolicy)
+from ros_helpers import Client, NodeProcess
+from sensor_msgs.msg import JointState
+from wifi_place_recognition.data.fingerprints import read_fingerprints
+from wifi_place_recognition.data.recording import FingerprintLog, RecordingError
+from wifi_place_recognition.ros.messages import status_values
+
+AP1, AP2 = 'aa:bb:cc:00:00:01', 'aa:bb:cc:00:00:02'
+#: The QoS of Nav2 AMCL's amcl_pose publisher.
+AMCL_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+# the file ---------------------------------------------------------------------
+
+def test_positions_are_columns_that_train_model_reads(tmp_path):
+    path = tmp_path / 'rec.csv'
+    log = FingerprintLog(path, positions=True)
+    assert log.add([AP1], [-50.0], 0, 1, 10.0, (1.5, -2.25, 'map')) == \
+        (True, 0)
+    # A new AP rewrites the file with the wider header: positions stay.
+    log.add([AP1, AP2], [-55.0, -70.0], 0, 2, 11.0, (3.0, 4.0, 'map_f2'))
+    log.add([AP2], [-60.0], 0, 2, 12.0, (-7600.125, 4864900.5, 'map_f2'))
+    assert path.read_text().splitlines()[0] == \
+        f'BUILDINGID,FLOOR,TIMESTAMP,X,Y,FRAME,{AP1},{AP2}'
+    fp = read_fingerprints(path)
+    assert fp.position_columns == ('X', 'Y')
+    np.testing.assert_array_equal(fp.position, [[1.5, -2.25], [3.0, 4.0],
+                                                [-7600.125, 4864900.5]])
+    assert fp.meta['FRAME'].tolist() == ['map', 'map_f2', 'map_f2']
+    assert fp.ap_ids == (AP1, AP2)
+    np.testing.assert_array_equal(fp.rssi, [[-50, np.nan], [-55, -70],
+                                            [np.nan, -60]])
+    assert fp.notes == []           # FRAME is known metadata, not a guess
+    # A frame that is a number is metadata too, never an AP.
+    FingerprintLog(path, positions=True).add([AP1], [-40.0], 0, 1, 13.0,
+                                             (0.0, 0.0, '-50'))
+    fp = read_fingerprints(path)
+    assert fp.ap_ids == (AP1, AP2) and fp.notes == []
+
+
+def test_a_torn_line_is_cut_and_positions_continue(tmp_path):
+    path = tmp_path / 'rec.csv'
+    FingerprintLog(path, positions=True).add([AP1], [-50.0], 1, 2, 1.0,
+                                             (1.0, 2.0, 'map'))
+    with open(path, 'a') as f:
+        f.write('1,2,2.000,3.0')        # killed mid-append
+    log = FingerprintLog(path, positions=True)
+    assert log.counts == {(1, 2): 1}
+    log.add([AP1], [-51.0], 1, 2, 3.0, (5.0, 6.0, 'map'))
+    fp = read_fingerprints(path)
+    np.testing.assert_array_equal(fp.position, [[1.0, 2.0], [5.0, 6.0]])
+
+
+def test_a_file_keeps_the_way_it_started(tmp_path):
+    plain, placed = tmp_path / 'plain.csv', tmp_path / 'placed.csv'
+    FingerprintLog(plain).add([AP1], [-50.0], 0, 0, 1.0)
+    FingerprintLog(placed, positions=True).add([AP1], [-50.0], 0, 0, 1.0,
+                                               (1.0, 2.0, 'map'))
+    with pytest.raises(RecordingError, match='without positions .*cannot '
+                       'add positions half-way'):
+        FingerprintLog(plain, positions=True)
+    with pytest.raises(RecordingError, match='with positions .*cannot '
+                       'continue without them'):
+        FingerprintLog(placed)
+    # Neither file was touched.
+    assert read_fingerprints(plain).position is None
+    assert len(read_fingerprints(placed)) == 1
+
+
+def test_a_position_needs_a_writable_frame(tmp_path):
+    log = FingerprintLog(tmp_path / 'rec.csv', positions=True)
+    for frame in ('', 'map,2', 'map\n', 'a"b'):
+        with pytest.raises(RecordingError, match='frame_id'):
+            log.add([AP1], [-50.0], 0, 0, 1.0, (1.0, 2.0, frame))
+    with pytest.raises(ValueError, match='position'):
+        log.add([AP1], [-50.0], 0, 0, 1.0)
+    with pytest.raises(ValueError, match='position'):
+        FingerprintLog(tmp_path / 'plain.csv').add([AP1], [-50.0], 0, 0, 1.0,
+                                                   (1.0, 2.0, 'map'))
+    assert not (tmp_path / 'rec.csv').exists()
+
+
+# the recorder over ROS ---------------------------------------------------------
+
+def _pose(stamp, x, y, frame):
+    msg = PoseWithCovarianceStamped()
+    msg.header.stamp.sec = int(stamp)
+    msg.header.stamp.nanosec = int(round((stamp - int(stamp)) * 1e9))
+    msg.header.frame_id = frame
+    msg.pose.pose.position.x = x
+    msg.pose.pose.position.y = y
+    msg.pose.pose.orientation.w = 1.0
+    return msg
+
+
+def _scan(stamp):
+    msg = JointState(name=[AP1, AP2], position=[-50.0, -70.0])
+    msg.header.stamp.sec = int(stamp)
+    msg.header.stamp.nanosec = int(round((stamp - int(stamp)) * 1e9))
+    return msg
+
+
+class Progress:
+    """The recorder's progress values on /diagnostics, as last published."""
+
+    def __init__(self, ros, name):
+        self.ros, self.name, self.values = ros, name, None
+        self.sub = ros.create_subscription(DiagnosticArray, '/diagnostics',
+                                           self._on_diagnostics, RELIABLE)
+
+    def _on_diagnostics(self, msg):
+        for status in msg.status:
+            if status.name == f'{self.name}: progress':
+                self.values = status_values(status)
+
+    def count(self, key):
+        """Return one counter of the last status (0 before any)."""
+        return int((self.values or {}).get(key, 0))
+
+    def deliver(self, publish, key, tries=5):
+        """Publish until the recorder's counter ``key`` goes up by one."""
+        before = self.count(key)
+        for _ in range(tries):
+            publish()
+            if wait_until(lambda: self.count(key) > before, 3, self.ros):
+                assert self.count(key) == before + 1, (key, self.values)
+                return
+        raise AssertionError(f'{key} did not move from {before}')
+
+
+def test_recorder_labels_scans_with_a_fresh_pose_and_skips_stale_ones(
+        ros, tmp_path):
+    csv_path = tmp_path / 'survey.csv'
+    progress = Progress(ros, 'pose_rec')
+    recorder = NodeProcess(tmp_path, python_module(
+        'ros.record_fingerprints', '--ros-args', '-p', f'output:={csv_path}',
+        '-p', 'building:=0', '-p', 'floor:=1', '-p', 'pose_topic:=/amcl_pose'),
+        'pose_rec')
+    client = Client(ros, 'pose_rec')
+    # AMCL's QoS, and a best-effort volatile source: both must connect.
+    amcl = ros.create_publisher(PoseWithCovarianceStamped, '/amcl_pose',
+                                AMCL_QOS)
+    other = ros.create_publisher(PoseWithCovarianceStamped, '/amcl_pose',
+                                 qos_profile_sensor_data)
+
+    def scan(stamp):
+        progress.deliver(lambda: client.pub.publish(_scan(stamp)),
+                         'scans_received')
+
+    def pose(publisher, *args):
+        progress.deliver(lambda: publisher.publish(_pose(*args)),
+                         'poses_received')
+    try:
+        assert wait_until(lambda: client.pub.get_subscription_count() and
+                          amcl.get_subscription_count() and
+                          other.get_subscription_count() and
+                          client.params.service_is_ready() and
+                          progress.values, 60, ros), recorder.stop()[1]
+        scan(1000.0)                                # no pose yet: skipped
+        pose(amcl, 1000.0, 1.5, -2.25, 'map')
+        pose(other, 1010.0, 7.0, 8.0, 'map_b0_f1')
+        pose(amcl, 1005.0, 0.0, 0.0, '')            # no frame: rejected
+        pose(other, 1012.5, math.nan, 0.0, 'map')   # not finite: rejected
+        scan(1000.5)        # labelled with the pose of 1000.0
+        scan(1005.0)        # 5 s from both: skipped
+        scan(1009.0)        # the pose of 1010.0, 1 s newer: labelled
+        scan(1012.5)        # the nearest pose is 2.5 s older: skipped
+        scan(1007.5)        # the nearest pose is 2.5 s newer: skipped
+        assert client.set_param('max_pose_age', 3.0).successful
+        assert not client.set_param('max_pose_age', -1.0).successful
+        scan(1007.25)       # 2.75 s: now fresh enough
+        # Zero stamps: the time the recorder takes the message.
+        now = time.time()
+        pose(amcl, now, 3.0, 4.0, 'map')
+        scan(0.0)
+        assert wait_until(lambda: progress.count('scans/B0F1') == 4, 5, ros)
+    finally:
+        values = progress.values
+        for entity in (amcl, other):
+            ros.destroy_publisher(entity)
+        ros.destroy_subscription(progress.sub)
+        client.close()
+        code, log = recorder.stop()
+    assert code == 0 and 'Traceback' not in log, log
+    assert {k: values[k] for k in (
+        'scans_received', 'scans_no_fresh_pose', 'scans/B0F1',
+        'poses_received', 'poses_rejected', 'scans_lost')} == {
+            'scans_received': '8', 'scans_no_fresh_pose': '4',
+            'scans/B0F1': '4', 'poses_received': '5', 'poses_rejected': '2',
+            'scans_lost': '0'}, values
+    assert 'scan skipped: no pose yet on /amcl_pose' in log, log
+    assert 'pose ignored: no frame_id' in log, log
+    fp = read_fingerprints(csv_path)
+    assert fp.notes == []
+    np.testing.assert_array_equal(fp.position, [[1.5, -2.25], [7.0, 8.0],
+                                                [7.0, 8.0], [3.0, 4.0]])
+    assert fp.meta['FRAME'].tolist() == ['map', 'map_b0_f1', 'map_b0_f1',
+                                         'map']
+    assert fp.meta['TIMESTAMP'].tolist() == [1000.5, 1009.0, 1007.25, 0.0]
+
+
+@pytest.mark.parametrize('positions, pose_topic, problem', [
+    (False, '/amcl_pose', 'recorded without positions'),
+    (True, None, 'recorded with positions')])
+def test_a_file_is_continued_only_the_way_it_started(tmp_path, positions,
+                                                     pose_topic, problem):
+    path = tmp_path / 'rec.csv'
+    FingerprintLog(path, positions).add(
+        [AP1], [-50.0], 0, 0, 1.0, (1.0, 2.0, 'map') if positions else None)
+    before = path.read_bytes()
+    result = run(python_module(
+        'ros.record_fingerprints', '--ros-args', '-p', f'output:={path}',
+        *(['-p', f'pose_topic:={pose_topic}'] if pose_topic else [])),
+        timeout=30)
+    assert result.returncode == 1, result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    assert '[record_fingerprints]: cannot start: ' in lines[0]
+    assert f'{path}: {problem}' in lines[0], lines[0]
+    assert path.read_bytes() == before
