@@ -14,8 +14,10 @@ import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.ros.messages import status_values
 
 RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+SCAN_COUNTS = ('received', 'answered', 'rejected', 'dropped')
 
 
 class NodeProcess:
@@ -132,22 +134,36 @@ class Client:
         self.round_trip_ms[seq] = (self.arrived[seq] - sent_at) * 1e3
         return self.answers[seq].status[0]
 
-    def counts(self, values):
+    def settled_counts(self, timeout=120):
         """
-        Return the scan counters of a health status, checked against this side.
+        Wait until two health reports in a row agree; return (counts, values).
 
-        The node cannot receive more than was sent, every received scan is
-        answered, rejected or dropped, and every answer this side got was
-        counted as answered or rejected.
+        The scan counts are then checked against this side: the node cannot
+        receive more than was sent, every received scan is answered,
+        rejected or dropped, and every answer this side got was counted as
+        answered or rejected (only once settled: an earlier report may miss
+        answers that were still on their way).
         """
-        counts = {k: int(values[f'scans_{k}']) for k in
-                  ('received', 'answered', 'rejected', 'dropped')}
+        last = None
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.health.clear()
+            assert wait_until(lambda: self.health, 30, self.node), \
+                f'no health status from {self.node_name} within 30 s'
+            values = status_values(self.health[-1])
+            counts = {k: int(values[f'scans_{k}']) for k in SCAN_COUNTS}
+            if counts == last:
+                break
+            last = counts
+        else:
+            raise AssertionError(f'counts still moving after {timeout} s: '
+                                 f'{last}')
         assert counts['received'] <= self.sent, (counts, self.sent)
         assert counts['received'] == (counts['answered'] + counts['rejected']
                                       + counts['dropped']), counts
         assert counts['answered'] + counts['rejected'] >= self.places, \
             (counts, self.places)
-        return counts
+        return counts, values
 
     def set_param(self, name, value):
         """Set one parameter over the service; return SetParametersResult."""

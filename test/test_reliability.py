@@ -131,22 +131,6 @@ def fuzz_node(ros, synthetic, tmp_path):
         yield started
 
 
-def _settled_counts(client, timeout=120):
-    """Wait until two health reports in a row agree; return (counts, values)."""
-    last = None
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        client.health.clear()
-        assert wait_until(lambda: client.health, 30, client.node), \
-            f'no health status from {client.node_name} within 30 s'
-        values = status_values(client.health[-1])
-        counts = client.counts(values)
-        if counts == last:
-            return counts, values
-        last = counts
-    raise AssertionError(f'counts still moving after {timeout} s: {last}')
-
-
 def test_fuzzed_scans_never_kill_the_node(fuzz_node):
     client, proc, model = fuzz_node
     for msg in fuzz_scans(model.ap_ids, 10_000, seed=1):
@@ -154,7 +138,7 @@ def test_fuzzed_scans_never_kill_the_node(fuzz_node):
         if client.sent % 200 == 0:
             wait_until(lambda: False, 0.01, client.node)
     assert proc.proc.poll() is None, proc.stop()[1]
-    counts, values = _settled_counts(client)
+    counts, values = client.settled_counts()
     assert counts['received'] > 1000, counts
     assert counts['rejected'] > 100 and counts['answered'] > 10, counts
     assert values['rejected/internal_error'] == '0'
@@ -168,7 +152,7 @@ def test_fuzzed_scans_never_kill_the_node(fuzz_node):
 
 def test_a_flood_keeps_memory_bounded_and_answers_the_newest(fuzz_node):
     client, proc, model = fuzz_node
-    _, before = _settled_counts(client)
+    _, before = client.settled_counts()
     names = list(model.ap_ids[:8])
     t0 = time.monotonic()
     while time.monotonic() - t0 < 5.0:
@@ -179,7 +163,7 @@ def test_a_flood_keeps_memory_bounded_and_answers_the_newest(fuzz_node):
     # Best-effort delivery may lose a scan of a burst: resend until answered.
     assert client.resend_until_answered(newest, 60) is not None, \
         f'the newest scan was not answered within 60 s; {proc.stop()[1]}'
-    counts, after = _settled_counts(client)
+    counts, after = client.settled_counts()
     assert counts['dropped'] > 0, counts
     growth = float(after['peak_rss_mib']) - float(before['rss_mib'])
     assert growth < 100, (before['rss_mib'], after['peak_rss_mib'])
