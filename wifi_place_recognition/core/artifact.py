@@ -160,6 +160,9 @@ def _build(header, arrays):
                for specs in header['members']]
     if not members:
         raise ModelFileError('the model has no network')
+    if len({tuple((layer.weight.shape, layer.activation) for layer in m)
+            for m in members}) > 1:
+        raise ModelFileError('the networks of the ensemble differ in shape')
     return PlaceModel(ap_ids, scaler, members, classes,
                       header.get('provenance', {}), _tracking(header),
                       _position(header, arrays, members, len(classes)))

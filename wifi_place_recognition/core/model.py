@@ -150,29 +150,41 @@ class ScanForward:
     An undetected AP's network input is a constant, so its part of the
     first layer is folded into the bias once; a scan (which detects a few
     dozen of hundreds of APs) then costs a gather of those columns instead
-    of the whole first matrix. Same probabilities as
-    :meth:`PlaceModel.predict_proba` up to float32 rounding.
+    of the whole first matrix. The members of an ensemble share one
+    architecture, so each layer runs for all of them in one batched
+    product. Same probabilities as :meth:`PlaceModel.predict_proba` up to
+    float32 rounding.
     """
 
     def __init__(self, model):
         self.model = model
+        members = model.members
+        n = len(members)
         empty = np.full((1, len(model.ap_ids)), np.nan, np.float32)
         self.blank = model.scaler.transform(empty)[0]
-        self.first = [(np.ascontiguousarray(layers[0].weight.T),
-                       layers[0].bias + layers[0].weight @ self.blank,
-                       ACTIVATIONS[layers[0].activation])
-                      for layers in model.members]
-        self.rest = [[self._prepared(layer) for layer in layers[1:]]
-                     for layers in model.members]
+        first = [layers[0] for layers in members]
+        self.width = first[0].weight.shape[0]
+        # every member's first layer side by side: one gather, one product
+        self.first_t = np.ascontiguousarray(np.concatenate(
+            [layer.weight.T for layer in first], axis=1))
+        self.first_bias = np.concatenate(
+            [layer.bias + layer.weight @ self.blank for layer in first])
+        self.first_act = ACTIVATIONS[first[0].activation]
+        self.rest = [self._stacked([layers[i] for layers in members])
+                     for i in range(1, len(members[0]))]
         position = model.position
         self.trunk = position.trunk if position else 0
-        self.heads = [[self._prepared(layer) for layer in head]
-                      for head in position.heads] if position else []
+        self.heads = [] if position is None else [
+            self._stacked([head[i] for head in position.heads])
+            for i in range(len(position.heads[0]))]
+        self.shape = (n, 1, self.width)
 
     @staticmethod
-    def _prepared(layer):
-        return (np.ascontiguousarray(layer.weight.T), layer.bias,
-                ACTIVATIONS[layer.activation])
+    def _stacked(layers):
+        """Return one layer of every member as batched (n, in, out) arrays."""
+        return (np.stack([layer.weight.T for layer in layers]),
+                np.stack([layer.bias for layer in layers])[:, None, :],
+                ACTIVATIONS[layers[0].activation])
 
     def __call__(self, rssi):
         """Return class probabilities (k,) for one (n_aps,) RSSI vector."""
@@ -183,20 +195,16 @@ class ScanForward:
         columns = np.flatnonzero(~np.isnan(rssi))
         delta = self.model.scaler.transform(rssi[columns], columns) - \
             self.blank[columns]
-        logits, places = [], []
-        for m, ((first_t, first_bias, first_act), rest) in enumerate(
-                zip(self.first, self.rest)):
-            x = first_act(first_bias + delta @ first_t[columns])
-            for done, (weight_t, bias, activation) in enumerate(rest, 1):
-                if done == self.trunk:
-                    places.append(self._head(x, self.heads[m]))
-                x = activation(x @ weight_t + bias)
-            logits.append(x)
-        return mean_softmax(logits), (sum(places) / len(places)
-                                      if places else None)
+        x = self.first_act(self.first_bias + delta @ self.first_t[columns])
+        x = x.reshape(self.shape)
+        place = None
+        for done, (weight_t, bias, activation) in enumerate(self.rest, 1):
+            if done == self.trunk:
+                place = self._head(x)
+            x = activation(np.matmul(x, weight_t) + bias)
+        return mean_softmax(x[:, 0, :]), place
 
-    @staticmethod
-    def _head(x, layers):
-        for weight_t, bias, activation in layers:
-            x = activation(x @ weight_t + bias)
-        return x
+    def _head(self, x):
+        for weight_t, bias, activation in self.heads:
+            x = activation(np.matmul(x, weight_t) + bias)
+        return x[:, 0, :].mean(axis=0)
