@@ -7,7 +7,6 @@ with no ROS environment variable at all.
 """
 
 import ast
-import ast
 import json
 import os
 from pathlib import Path
