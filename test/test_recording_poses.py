@@ -156,9 +156,12 @@ def test_recorder_labels_scans_with_a_fresh_pose_and_skips_stale_ones(
     other = ros.create_publisher(PoseWithCovarianceStamped, '/amcl_pose',
                                  qos_profile_sensor_data)
 
-    def scan(stamp):
+    def scan(stamp, labelled):
+        before = progress.count('scans/B0F1')
         progress.deliver(lambda: client.pub.publish(_scan(stamp)),
                          'scans_received')
+        assert progress.count('scans/B0F1') == before + labelled, \
+            (stamp, progress.values)
 
     def pose(publisher, *args):
         progress.deliver(lambda: publisher.publish(_pose(*args)),
@@ -169,24 +172,22 @@ def test_recorder_labels_scans_with_a_fresh_pose_and_skips_stale_ones(
                           other.get_subscription_count() and
                           client.params.service_is_ready() and
                           progress.values, 60, ros), recorder.stop()[1]
-        scan(1000.0)                                # no pose yet: skipped
+        scan(1000.0, False)                         # no pose yet
         pose(amcl, 1000.0, 1.5, -2.25, 'map')
         pose(other, 1010.0, 7.0, 8.0, 'map_b0_f1')
         pose(amcl, 1005.0, 0.0, 0.0, '')            # no frame: rejected
         pose(other, 1012.5, math.nan, 0.0, 'map')   # not finite: rejected
-        scan(1000.5)        # labelled with the pose of 1000.0
-        scan(1005.0)        # 5 s from both: skipped
-        scan(1009.0)        # the pose of 1010.0, 1 s newer: labelled
-        scan(1012.5)        # the nearest pose is 2.5 s older: skipped
-        scan(1007.5)        # the nearest pose is 2.5 s newer: skipped
+        scan(1000.5, True)      # labelled with the pose of 1000.0
+        scan(1005.0, False)     # 5 s from both
+        scan(1009.0, True)      # the pose of 1010.0, 1 s newer
+        scan(1012.5, False)     # the nearest pose is 2.5 s older
+        scan(1007.5, False)     # the nearest pose is 2.5 s newer
         assert client.set_param('max_pose_age', 3.0).successful
         assert not client.set_param('max_pose_age', -1.0).successful
-        scan(1007.25)       # 2.75 s: now fresh enough
+        scan(1007.25, True)     # 2.75 s: now fresh enough
         # Zero stamps: the time the recorder takes the message.
-        now = time.time()
-        pose(amcl, now, 3.0, 4.0, 'map')
-        scan(0.0)
-        assert wait_until(lambda: progress.count('scans/B0F1') == 4, 5, ros)
+        pose(amcl, time.time(), 3.0, 4.0, 'map')
+        scan(0.0, True)
     finally:
         values = progress.values
         for entity in (amcl, other):
