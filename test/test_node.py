@@ -24,6 +24,8 @@ def running(ros, synthetic, tmp_path, request):
 
 def test_answers_match_the_model_and_carry_the_contract(running, synthetic):
     client, proc, model = running
+    # Each scan on its own, as model.predict (tracking: test_tracking_node).
+    assert client.set_param('tracking', False).successful
     fp = read_fingerprints(synthetic[0])
     for row in range(0, len(fp), 37):
         detected = np.flatnonzero(np.isfinite(fp.rssi[row]))
