@@ -2,16 +2,19 @@
 
 import json
 import sys
+from xml.etree import ElementTree
 
-from conftest import DOMAIN_ID, run, TEST_DIR
+from conftest import DOMAIN_ID, REPO, run, TEST_DIR
 import numpy as np
 import pytest
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.core.resources import default_model_path
 
-ROS = ('rclpy', 'rcl_interfaces', 'sensor_msgs', 'diagnostic_msgs',
-       'std_srvs', 'ament_index_python')
+# Every ROS package the nodes declare (package.xml), e.g. rclpy, messages.
+ROS = tuple(e.text for tag in ('depend', 'exec_depend') for e in
+            ElementTree.parse(REPO / 'package.xml').getroot().iter(tag)
+            if not e.text.startswith('python3-'))
 TRAINING = ('torch', 'sklearn')
 
 IMPORT_AND_CLASSIFY = '''
