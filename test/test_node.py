@@ -15,16 +15,19 @@ from wifi_place_recognition.ros.messages import status_values
 
 @pytest.fixture
 def running(ros, synthetic, tmp_path, request):
-    """Start a node on the synthetic model; yield (client, proc, model)."""
+    """Start a node on the synthetic model; yield (client, proc, model).
+
+    Tracking is off: these tests check each scan's own answer (tracking:
+    test_tracking_node).
+    """
     name = f'classifier_{request.node.name[5:25]}'.replace('[', '_')
     with running_node(ros, tmp_path, synthetic[1], name, '-p',
-                      'max_aps:=50') as started:
+                      'max_aps:=50', '-p', 'tracking:=false') as started:
         yield started
 
 
 def test_answers_match_the_model_and_carry_the_contract(running, synthetic):
     client, proc, model = running
-    # Each scan on its own, as model.predict (tracking: test_tracking_node).
     assert client.set_param('tracking', False).successful
     fp = read_fingerprints(synthetic[0])
     for row in range(0, len(fp), 37):

@@ -27,6 +27,17 @@ class Place:
     scan_building: int          # this scan alone
     scan_floor: int
     scan_confidence: float
+    position: np.ndarray = None  # (2,) metres (tracked when tracking)
+    position_cov: np.ndarray = None  # (2, 2) m^2
+    scan_position: np.ndarray = None  # (2,) this scan alone
+    scan_sigma: float = float('nan')  # m, this scan alone
+
+    @property
+    def position_sigma(self):
+        """Return the position's standard deviation (m), NaN without one."""
+        if self.position_cov is None:
+            return float('nan')
+        return float(np.sqrt(np.trace(self.position_cov) / 2))
 
 
 class PlaceRecognizer:
@@ -37,7 +48,8 @@ class PlaceRecognizer:
     fewer than ``min_known_aps`` APs of the scan are known to the model.
     :meth:`classify` raises :class:`ScanRejected` for a scan it cannot use.
     ``forward`` turns a model-ordered RSSI vector into class probabilities
-    (default: the numpy :class:`ScanForward` of ``model``). With a
+    and the position head's outputs (or None), by default the numpy
+    :meth:`ScanForward.outputs` of ``model``. With a
     ``tracker`` (:meth:`track`), scans given a time are tracked over time
     and the answer is the tracked one.
     """
@@ -45,7 +57,7 @@ class PlaceRecognizer:
     def __init__(self, model, min_confidence=0.5, min_known_aps=3,
                  max_aps=4096, forward=None):
         self.model = model
-        self.forward = forward or ScanForward(model)
+        self.forward = forward or ScanForward(model).outputs
         self.mapper = ScanMapper(model.ap_ids, max_aps)
         self.min_confidence = min_confidence
         self.min_known_aps = min_known_aps
@@ -63,17 +75,25 @@ class PlaceRecognizer:
         ``time`` (s) is when the scan was taken; tracking needs it.
         """
         scan = self.mapper.map(names, rssi)
-        proba = self.forward(scan.rssi)
+        proba, head = self.forward(scan.rssi)
         best = int(proba.argmax())
         scan_building, scan_floor = (int(v) for v in self.model.classes[best])
         scan_confidence = float(proba[best])
+        xy = cov = None
+        sigma = float('nan')
+        if head is not None:
+            xy = self.model.position.to_metres(head)
+            sigma = float(self.model.position.sigma[best])
+            cov = np.eye(2) * sigma ** 2
+        scan_xy = xy
         if self.tracker is None or time is None:
             building, floor = scan_building, scan_floor
             confidence, probabilities = scan_confidence, proba
         else:
-            track = self.tracker.update(time, proba)
+            track = self.tracker.update(time, proba, xy, cov)
             building, floor = track.building, track.floor
             confidence, probabilities = track.confidence, track.belief
+            xy, cov = track.xy, track.cov
         message = f'building {building}, floor {floor} (p={confidence:.2f})'
         if (building, floor) != (scan_building, scan_floor):
             message += (f'; this scan alone: building {scan_building}, '
@@ -88,4 +108,5 @@ class PlaceRecognizer:
                         f'{self.min_known_aps})')
         return Place(building, floor, confidence, probabilities, scan.known,
                      scan.unknown, scan.clipped, level, message,
-                     scan_building, scan_floor, scan_confidence)
+                     scan_building, scan_floor, scan_confidence, xy, cov,
+                     scan_xy, sigma)

@@ -4,12 +4,15 @@
 Subscribes ``wifi/scan`` (``sensor_msgs/JointState``: ``name`` = AP id,
 ``position`` = RSSI dBm) and publishes one ``diagnostic_msgs/DiagnosticArray``
 per processed scan on ``~/place`` and ``/diagnostics``, plus a 1 Hz health
-status on ``/diagnostics``. Inference is a numpy forward pass: torch is
-never imported. Each scan is processed in the subscription callback. The
-subscription keeps one scan (KEEP_LAST, depth 1): a scan that arrives while
-another is processed replaces any still waiting, so the newest is processed
-next; the gaps in the publisher's sequence numbers count the replaced ones
-as dropped (:class:`.sequence.PublisherGaps`).
+status on ``/diagnostics``; with a model that has a position output, also a
+``geometry_msgs/PoseWithCovarianceStamped`` on ``~/pose`` per answer, and
+``~/publish_initial_pose`` sends the next confident one on ``initialpose``.
+Inference is a numpy forward pass: torch is never imported. Each scan is
+processed in the subscription callback. The subscription keeps one scan
+(KEEP_LAST, depth 1): a scan that arrives while another is processed
+replaces any still waiting, so the newest is processed next; the gaps in
+the publisher's sequence numbers count the replaced ones as dropped
+(:class:`.sequence.PublisherGaps`).
 """
 
 import copy
@@ -19,6 +22,7 @@ import time
 from collections import Counter
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
                                 ParameterDescriptor, SetParametersResult)
 from rclpy.node import Node
@@ -37,6 +41,9 @@ from ..core.tracking import DEFAULT_TIMEOUT
 
 LEVELS = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN}
 THROTTLE_S = 5.0
+#: Variance (rad^2) of the unknown yaw, and of z, roll and pitch: WiFi
+#: gives no orientation, and the floor is given by the frame.
+UNKNOWN_VARIANCE = 1e6
 # Sensor-data QoS that keeps only the newest scan waiting.
 SCAN_QOS = copy.copy(qos_profile_sensor_data)
 SCAN_QOS.depth = 1
@@ -59,6 +66,17 @@ def _memory_mib():
     except OSError:
         pass
     return found.get('VmRSS', math.nan), found.get('VmHWM', math.nan)
+
+
+def _check_frame(template):
+    """Raise ValueError unless ``template`` formats with building, floor."""
+    try:
+        frame = template.format(building=0, floor=0)
+    except (KeyError, IndexError, ValueError) as exc:
+        raise ValueError(f'frame_id {template!r}: only {{building}} and '
+                         f'{{floor}} may be substituted ({exc!r})') from None
+    if not frame:
+        raise ValueError('frame_id must not be empty')
 
 
 def _kv(key, value):
@@ -108,6 +126,17 @@ class ClassifierNode(Node):
                             'which the tracked belief restarts',
                 floating_point_range=[FloatingPointRange(
                     from_value=1.0, to_value=1e6)])).value
+        self.frame_id = self.declare_parameter(
+            'frame_id', 'map', ParameterDescriptor(
+                description='frame of ~/pose and initialpose; may contain '
+                            '{building} and {floor} (one map per floor)'
+                )).value
+        _check_frame(self.frame_id)
+        self._send_initial_pose = self.declare_parameter(
+            'publish_initial_pose', False, ParameterDescriptor(
+                description='at start-up, send the first confident answer '
+                            'on initialpose (as the service does)',
+                read_only=True)).value
 
         self.model_path = model_path
         model = load_model(model_path)
@@ -134,6 +163,17 @@ class ClassifierNode(Node):
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.create_timer(1.0, self._publish_health)
         self.create_service(Trigger, '~/reset', self._on_reset)
+        self.pose_pub = self.initial_pose_pub = None
+        if model.position is not None:
+            self.pose_pub = self.create_publisher(
+                PoseWithCovarianceStamped, '~/pose', 10)
+            self.initial_pose_pub = self.create_publisher(
+                PoseWithCovarianceStamped, 'initialpose', 1)
+            self.create_service(Trigger, '~/publish_initial_pose',
+                                self._on_publish_initial_pose)
+        elif self._send_initial_pose:
+            raise ValueError('publish_initial_pose: the model has no '
+                             'position output (trained without X, Y)')
         provenance = self.recognizer.model.provenance
         self.get_logger().info(
             f'model {model_path}: {len(self.recognizer.model.ap_ids)} APs, '
@@ -147,6 +187,12 @@ class ClassifierNode(Node):
                     not math.isfinite(p.value):
                 return SetParametersResult(
                     successful=False, reason=f'{p.name} must be finite')
+            if p.name == 'frame_id':
+                try:
+                    _check_frame(p.value)
+                except ValueError as exc:
+                    return SetParametersResult(successful=False,
+                                               reason=str(exc))
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params):
@@ -163,6 +209,19 @@ class ClassifierNode(Node):
                 self.tracking_timeout = p.value
                 if self.recognizer.tracker is not None:
                     self.recognizer.tracker.timeout = p.value
+            elif p.name == 'frame_id':
+                self.frame_id = p.value
+
+    def _on_publish_initial_pose(self, request, response):
+        self._send_initial_pose = True
+        response.success = True
+        response.message = (
+            f'the next confident answer (p >= '
+            f'{self.recognizer.min_confidence:g}, >= '
+            f'{self.recognizer.min_known_aps} known APs) goes to '
+            f'{self.initial_pose_pub.topic_name}')
+        self.get_logger().info(response.message)
+        return response
 
     def _on_reset(self, request, response):
         tracker = self.recognizer.tracker
@@ -210,12 +269,50 @@ class ClassifierNode(Node):
                 _kv('latency_ms', f'{latency_ms:.3f}'),
             ] + [_kv(k, f'{p:.6f}') for k, p in
                  zip(self.prob_keys, place.probabilities)]
+            if place.position is not None:
+                status.values += self._position_values(place)
             self.last_latency_ms = latency_ms
             self.counts['answered'] += 1
         out = DiagnosticArray(status=[status])
         out.header.stamp = msg.header.stamp
         self.place_pub.publish(out)
         self.diag_pub.publish(out)
+        if status.level != DiagnosticStatus.ERROR and \
+                place.position is not None:
+            self._publish_pose(place, msg.header.stamp, status.level)
+
+    @staticmethod
+    def _position_values(place):
+        return [_kv('x', f'{place.position[0]:.3f}'),
+                _kv('y', f'{place.position[1]:.3f}'),
+                _kv('position_sigma_m', f'{place.position_sigma:.3f}'),
+                _kv('scan_x', f'{place.scan_position[0]:.3f}'),
+                _kv('scan_y', f'{place.scan_position[1]:.3f}'),
+                _kv('scan_sigma_m', f'{place.scan_sigma:.3f}')]
+
+    def _publish_pose(self, place, stamp, level):
+        pose = PoseWithCovarianceStamped()
+        pose.header.stamp = stamp
+        pose.header.frame_id = self.frame_id.format(building=place.building,
+                                                    floor=place.floor)
+        pose.pose.pose.position.x = float(place.position[0])
+        pose.pose.pose.position.y = float(place.position[1])
+        pose.pose.pose.orientation.w = 1.0
+        covariance = [0.0] * 36
+        (covariance[0], covariance[1]), (covariance[6], covariance[7]) = \
+            place.position_cov.tolist()
+        for i in (14, 21, 28, 35):  # z, roll, pitch, yaw: unknown
+            covariance[i] = UNKNOWN_VARIANCE
+        pose.pose.covariance = covariance
+        self.pose_pub.publish(pose)
+        if self._send_initial_pose and level == DiagnosticStatus.OK:
+            self._send_initial_pose = False
+            self.initial_pose_pub.publish(pose)
+            self.get_logger().info(
+                f'initialpose sent: building {place.building}, floor '
+                f'{place.floor}, x {place.position[0]:.2f}, y '
+                f'{place.position[1]:.2f} in {pose.header.frame_id} '
+                f'(sigma {place.position_sigma:.1f} m)')
 
     def _scan_time(self, stamp):
         """Return the scan's time (s): its stamp, or now when unset."""
@@ -266,8 +363,8 @@ class ClassifierNode(Node):
 
 
 def main(args=None):
-    """Run the node until SIGINT/SIGTERM; exit 1 on a bad model file."""
-    return run(ClassifierNode, args, (ModelFileError,))
+    """Run the node until SIGINT/SIGTERM; exit 1 on a bad start-up."""
+    return run(ClassifierNode, args, (ModelFileError, ValueError))
 
 
 if __name__ == '__main__':
