@@ -232,3 +232,24 @@ def test_a_file_is_continued_only_the_way_it_started(tmp_path, positions,
     assert '[record_fingerprints]: cannot start: ' in lines[0]
     assert f'{path}: {problem}' in lines[0], lines[0]
     assert path.read_bytes() == before
+
+
+def test_qos_overrides_receive_amcls_last_pose(ros, tmp_path):
+    amcl = ros.create_publisher(PoseWithCovarianceStamped, '/amcl_pose',
+                                AMCL_QOS)
+    amcl.publish(_pose(1000.0, 1.0, 2.0, 'map'))   # before the recorder
+    progress = Progress(ros, 'latched_rec')
+    prefix = 'qos_overrides./amcl_pose.subscription'
+    recorder = NodeProcess(tmp_path, python_module(
+        'ros.record_fingerprints', '--ros-args', '-p',
+        f'output:={tmp_path / "rec.csv"}', '-p', 'pose_topic:=/amcl_pose',
+        '-p', f'{prefix}.reliability:=reliable',
+        '-p', f'{prefix}.durability:=transient_local'), 'latched_rec')
+    try:
+        assert wait_until(lambda: progress.count('poses_received') == 1, 30,
+                          ros), progress.values
+    finally:
+        ros.destroy_publisher(amcl)
+        ros.destroy_subscription(progress.sub)
+        code, log = recorder.stop()
+    assert code == 0 and 'Traceback' not in log, log

@@ -20,7 +20,7 @@ sensor-data publisher) with a deep queue: rewriting a large file for a new
 AP can take a second, and the scans arriving meanwhile wait instead of
 being lost. The pose subscription is best effort and volatile, so it
 matches reliable and transient-local publishers (AMCL's) as well as
-sensor-data ones.
+sensor-data ones; parameters can override its reliability and durability.
 """
 
 from collections import Counter, deque
@@ -33,8 +33,8 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
                                 ParameterDescriptor)
 from rclpy.node import Node
-from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data, QoSProfile,
-                       ReliabilityPolicy)
+from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data,
+                       QoSPolicyKind, QoSProfile, ReliabilityPolicy)
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
@@ -48,6 +48,8 @@ SCAN_QOS = copy.copy(qos_profile_sensor_data)
 SCAN_QOS.depth = 1000
 POSE_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT,
                       durability=DurabilityPolicy.VOLATILE)
+POSE_QOS_OVERRIDES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
+                      QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
 #: Poses kept to label scans that waited in the queue.
 POSE_HISTORY = 500
 
@@ -102,8 +104,8 @@ class RecordFingerprintsNode(Node):
             # the poses that wait before the scans that wait.
             self._pose_sub = self.create_subscription(
                 PoseWithCovarianceStamped, pose_topic, self._on_pose,
-                POSE_QOS, qos_overriding_options=QoSOverridingOptions
-                .with_default_policies())
+                POSE_QOS, qos_overriding_options=QoSOverridingOptions(
+                    policy_kinds=POSE_QOS_OVERRIDES))
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
         self._scan_sub = self.create_subscription(
