@@ -29,17 +29,15 @@ def _torch_net(layers):
 
 
 def torch_forward(model):
-    """
-    Return a one-scan forward pass that runs ``model``'s nets in torch.
-
-    Class probabilities only (no position head): a latency baseline.
-    """
+    """Return a one-scan forward pass that runs ``model``'s nets in torch."""
     nets = [_torch_net(layers) for layers in model.members]
 
-    def forward(rssi):
+    def forward(columns, inputs):
+        x = model.blank.copy()
+        x[columns] += inputs
         with torch.no_grad():
-            x = torch.from_numpy(model.scaler.transform(rssi[None, :]))
-            return mean_softmax([net(x).numpy() for net in nets])[0], None
+            x = torch.from_numpy(x[None, :])
+            return mean_softmax([net(x).numpy() for net in nets])[0]
     return forward
 
 

@@ -90,17 +90,21 @@ def synthetic_csv(path, scans_per_class=60, n_aps=24, seed=0, phones=4,
     return path
 
 
-def surveyed_csv(path, scans_per_floor=200, n_aps=30, seed=0, phones=4):
+def surveyed_csv(path, scans_per_floor=200, n_aps=30, seed=0, phones=4,
+                 scans_seed=None):
     """
     Write a generic CSV with X, Y: one building, 2 floors of 40 m x 40 m.
 
     APs stand at random places on either floor; RSSI falls with distance
     (log-distance path loss, 12 dB more through the floor), so the
-    position can be learned from the scan.
+    position can be learned from the scan. ``seed`` draws the building,
+    ``scans_seed`` (default: ``seed``) the scans.
     """
     rng = np.random.default_rng(seed)
     ap_xy = rng.uniform(0, 40, (n_aps, 2))
     ap_floor = rng.integers(0, 2, n_aps)
+    if scans_seed is not None:
+        rng = np.random.default_rng(scans_seed)
     lines = [','.join([mac(i) for i in range(n_aps)]
                       + ['X', 'Y', 'FLOOR', 'BUILDINGID', 'PHONEID'])]
     for floor in (0, 1):

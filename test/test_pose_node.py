@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from ros_helpers import RELIABLE, running_node
 from std_srvs.srv import Trigger
-from wifi_place_recognition.core.model import R95
+from wifi_place_recognition.core.locator import R95
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.ros.messages import status_values
 
@@ -20,9 +20,9 @@ def located(tmp_path_factory):
     model = folder / 'model.npz'
     result = run(python_module(
         'cli.train_model', '--data', surveyed_csv(folder / 'a.csv'), '-o',
-        model, *FAST, '--position-layers', '32', '--epochs', '30'))
+        model, *FAST, '--epochs', '20'))
     assert result.returncode == 0, result.stderr
-    test = read_fingerprints(surveyed_csv(folder / 'b.csv', seed=0,
+    test = read_fingerprints(surveyed_csv(folder / 'b.csv', scans_seed=1,
                                           scans_per_floor=10))
     return model, test
 

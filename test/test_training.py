@@ -12,7 +12,9 @@ from wifi_place_recognition.core.artifact import load_model, save_model
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from fuzz import hostile_model_files
 from wifi_place_recognition.core.metrics import class_index
-from wifi_place_recognition.core.model import mean_softmax, R95, ScanForward
+from wifi_place_recognition.core.locator import R95
+from wifi_place_recognition.core.model import mean_softmax, ScanForward
+from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.selection import grouped_folds
 from wifi_place_recognition.training.trainer import train
@@ -62,7 +64,7 @@ def test_learns_the_synthetic_building_and_numpy_matches_torch(tmp_path):
     reference = _torch_proba(nets, model, test.rssi)
     np.testing.assert_allclose(proba, reference, atol=1e-5)
     forward = ScanForward(model)
-    np.testing.assert_allclose([forward(row) for row in test.rssi],
+    np.testing.assert_allclose([forward(*model.sparse(row)) for row in test.rssi],
                                reference, atol=1e-5)
 
 
@@ -123,7 +125,7 @@ def test_numpy_matches_torch_on_real_data():
     assert (proba.argmax(1) == ref.argmax(1)).all()
     # The node's one-scan path (sparse first layer) agrees as well.
     forward = ScanForward(model)
-    single = np.stack([forward(row) for row in test.rssi])
+    single = np.stack([forward(*model.sparse(row)) for row in test.rssi])
     assert np.abs(single - ref).max() <= 1e-5
     assert (single.argmax(1) == ref.argmax(1)).all()
 
@@ -206,31 +208,35 @@ def test_evaluate_model_bad_inputs_exit_2_without_traceback(
 
 # position -------------------------------------------------------------------
 
-def test_position_head_learns_xy_and_round_trips_the_model_file(tmp_path):
+def test_position_by_neighbours_round_trips_the_model_file(tmp_path):
     fp = read_fingerprints(surveyed_csv(tmp_path / 'a.csv'))
-    test = read_fingerprints(surveyed_csv(tmp_path / 'b.csv', seed=0,
+    test = read_fingerprints(surveyed_csv(tmp_path / 'b.csv', scans_seed=1,
                                           scans_per_floor=60))
     config = TrainConfig(sae_layers=(32, 16), classifier_layers=(16,),
-                         position_layers=(32,), sae_epochs=3, epochs=30,
-                         batch_size=32, ensemble=2, folds=2)
+                         sae_epochs=3, epochs=20, batch_size=32, ensemble=2,
+                         folds=2)
     model, nets, report = train(fp, config, log=lambda s: None)
     save_model(model, tmp_path / 'm.npz')
     loaded = load_model(tmp_path / 'm.npz')
     assert loaded.position.columns == ('X', 'Y')
+    assert loaded.position.neighbours == report.selection['neighbours']
     np.testing.assert_array_equal(loaded.position.origin,
                                   fp.position.mean(axis=0))
     proba, xy, sigma = loaded.locate(test.rssi)
     error = np.linalg.norm(xy - test.position, axis=1)
     # scans spread over 40 m x 40 m floors: guessing the middle is ~15 m off
-    assert error.mean() < 6.0, error.mean()
-    assert report.selection['position_mean_error_m'] < 8.0
+    assert error.mean() < 4.0, error.mean()
+    assert report.selection['position_mean_error_m'] < 5.0
     assert 0.85 <= (error <= R95 * sigma).mean() <= 1.0
-    forward = ScanForward(loaded)
-    for row, p_row, xy_row in zip(test.rssi[:20], proba, xy):
-        p_one, head = forward.outputs(row)
-        np.testing.assert_allclose(p_one, p_row, atol=1e-5)
-        np.testing.assert_allclose(loaded.position.to_metres(head), xy_row,
-                                   atol=1e-3)
+    recognizer = PlaceRecognizer(loaded)
+    for row in range(0, len(test), 7):
+        detected = np.flatnonzero(np.isfinite(test.rssi[row]))
+        place = recognizer.classify([test.ap_ids[j] for j in detected],
+                                    test.rssi[row, detected])
+        np.testing.assert_allclose(place.probabilities, proba[row],
+                                   atol=1e-5)
+        np.testing.assert_allclose(place.position, xy[row], atol=1e-6)
+        assert place.position_sigma == pytest.approx(sigma[row])
 
 
 def test_a_classifier_only_model_refuses_to_locate(synthetic):
@@ -242,11 +248,11 @@ def test_a_classifier_only_model_refuses_to_locate(synthetic):
 
 def test_evaluate_model_reports_position_errors_and_draws(tmp_path):
     data = surveyed_csv(tmp_path / 'a.csv')
-    test = surveyed_csv(tmp_path / 'b.csv', seed=0, scans_per_floor=40)
+    test = surveyed_csv(tmp_path / 'b.csv', scans_seed=1, scans_per_floor=40)
     model = tmp_path / 'model.npz'
     result = run(python_module(
         'cli.train_model', '--data', data, '-o', model, *FAST,
-        '--position-layers', '32', '--epochs', '30', '--folds', '2'))
+        '--epochs', '20', '--folds', '2'))
     assert result.returncode == 0, result.stderr
     preds, plots = tmp_path / 'pred.csv', tmp_path / 'plots'
     result = run(python_module(

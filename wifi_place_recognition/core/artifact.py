@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_write
-from .model import ACTIVATIONS, Layer, PlaceModel, PositionHead
+from .locator import Locator
+from .model import ACTIVATIONS, Layer, PlaceModel
 from .preprocessing import RssiScaler
 from .tracking import TrackingParams
 
@@ -24,6 +25,9 @@ FORMAT = 'wifi_place_recognition/model'
 SCHEMA_VERSION = 1
 MAX_FILE_BYTES = 256 << 20
 MAX_UNPACKED_BYTES = 1 << 30
+#: The locator's arrays in the file (all float32; indices exact to 2**24).
+LOCATOR_ARRAYS = ('class_start', 'column_start', 'entry_ref', 'entry_value',
+                  'norms', 'xy', 'sigma')
 
 
 class ModelFileError(ValueError):
@@ -53,13 +57,15 @@ def save_model(model, path):
         header['tracking'] = model.tracking.to_dict()
     if model.position is not None:
         pos = model.position
-        arrays['position.sigma'] = np.asarray(pos.sigma, np.float32)
-        header['position'] = {
-            'origin': [float(v) for v in pos.origin],
-            'scale': float(pos.scale), 'trunk': int(pos.trunk),
-            'columns': list(pos.columns), 'units': 'm',
-            'heads': [_layer_specs(head, f'member{m}.position', arrays)
-                      for m, head in enumerate(pos.heads)]}
+        if len(pos.entry_ref) >= 1 << 24:
+            raise ValueError('too many reference readings for the model file '
+                             f'({len(pos.entry_ref)}, at most 2**24)')
+        for name in LOCATOR_ARRAYS:
+            arrays[f'position.{name}'] = np.asarray(getattr(pos, name),
+                                                    np.float32)
+        header['position'] = {'origin': [float(v) for v in pos.origin],
+                              'neighbours': pos.neighbours,
+                              'columns': list(pos.columns), 'units': 'm'}
     header['sha256'] = _digest(header, arrays)
     arrays['header'] = np.frombuffer(json.dumps(header).encode(), np.uint8)
     with atomic_write(path) as f:
@@ -165,7 +171,7 @@ def _build(header, arrays):
         raise ModelFileError('the networks of the ensemble differ in shape')
     return PlaceModel(ap_ids, scaler, members, classes,
                       header.get('provenance', {}), _tracking(header),
-                      _position(header, arrays, members, len(classes)))
+                      _position(header, arrays, len(ap_ids), len(classes)))
 
 
 def _tracking(header):
@@ -178,30 +184,48 @@ def _tracking(header):
         raise ModelFileError(f'tracking section: {exc}') from None
 
 
-def _position(header, arrays, members, n_classes):
-    """Return the optional position head (None: a classifier only)."""
+def _position(header, arrays, n_aps, n_classes):
+    """Return the optional position locator (None: a classifier only)."""
     if 'position' not in header:
         return None
     spec = header['position']
     origin = np.asarray(spec['origin'], np.float64)
-    trunk, scale = spec['trunk'], spec['scale']
+    columns, k = spec['columns'], spec['neighbours']
     if origin.shape != (2,) or not np.isfinite(origin).all() or \
-            not (isinstance(scale, float) and scale > 0):
-        raise ModelFileError('position: origin must be two finite numbers '
-                             'and scale a positive number')
-    if not isinstance(trunk, int) or not \
-            all(0 < trunk < len(layers) for layers in members) or \
-            len(spec['heads']) != len(members):
-        raise ModelFileError('position: trunk and heads do not fit the '
-                             'networks')
-    heads = [_layers(head, arrays, layers[trunk - 1].weight.shape[0], 2)
-             for head, layers in zip(spec['heads'], members)]
-    sigma = arrays['position.sigma']
-    if sigma.shape != (n_classes,) or not (sigma > 0).all():
-        raise ModelFileError(f'position.sigma must be {n_classes} positive '
-                             f'values, one per class')
-    return PositionHead(origin, scale, trunk, heads, sigma,
-                        tuple(spec['columns']))
+            not (isinstance(k, int) and k > 0) or len(columns) != 2 or \
+            not all(isinstance(c, str) for c in columns):
+        raise ModelFileError('position: origin must be two finite numbers, '
+                             'neighbours a positive integer and columns two '
+                             'names')
+    a = {name: arrays[f'position.{name}'] for name in LOCATOR_ARRAYS}
+    n_refs, n_entries = len(a['norms']), len(a['entry_ref'])
+    index = [a['class_start'], a['column_start'], a['entry_ref']]
+    shapes_ok = (a['class_start'].shape == (n_classes + 1,) and
+                 a['column_start'].shape == (n_classes, n_aps + 1) and
+                 a['entry_value'].shape == (n_entries,) and
+                 a['xy'].shape == (n_refs, 2) and
+                 a['sigma'].shape == (n_classes,))
+    if not shapes_ok or not all(np.isfinite(v).all() for v in a.values()) \
+            or not all((i == np.round(i)).all() and (i >= 0).all()
+                       for i in index):
+        raise ModelFileError('position: reference arrays of wrong shape or '
+                             'values')
+    class_start, column_start = (i.astype(np.int64) for i in index[:2])
+    entry_ref = a['entry_ref'].astype(np.int32)
+    flat = column_start.ravel()
+    if class_start[0] != 0 or class_start[-1] != n_refs or \
+            (np.diff(class_start) < 0).any() or flat[0] != 0 or \
+            (np.diff(flat) < 0).any() or flat[-1] != n_entries or \
+            (entry_ref >= n_refs).any() or not (a['sigma'] > 0).all():
+        raise ModelFileError('position: inconsistent reference index')
+    per_class = np.diff(np.append(column_start[:, 0], n_entries))
+    entry_class = np.repeat(np.arange(n_classes), per_class)
+    if (entry_ref < class_start[entry_class]).any() or \
+            (entry_ref >= class_start[entry_class + 1]).any():
+        raise ModelFileError('position: a reference outside its class')
+    return Locator(origin, class_start, column_start, entry_ref,
+                   a['entry_value'], a['norms'], a['xy'], a['sigma'], k,
+                   tuple(columns))
 
 
 def _layers(specs, arrays, n_inputs, n_outputs):

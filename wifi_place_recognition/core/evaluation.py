@@ -3,7 +3,7 @@
 import numpy as np
 
 from .metrics import accuracies, confusion
-from .model import R95
+from .locator import R95
 from .scan import ScanMapper
 
 #: The IPIN 2015 competition's penalties on UJIIndoorLoc (metres).

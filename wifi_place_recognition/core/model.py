@@ -24,10 +24,6 @@ ACTIVATIONS = {'relu': _relu, 'elu': _elu, 'linear': _identity,
                'tanh': np.tanh}
 
 
-#: Radius of the 95 % circle of a 2-D isotropic Gaussian, in sigmas.
-R95 = float(np.sqrt(-2 * np.log(0.05)))
-
-
 def mean_softmax(member_logits):
     """Return the mean over members of softmax(logits) along the last axis."""
     total = 0.0
@@ -44,30 +40,6 @@ class Layer:
     weight: np.ndarray  # (out, in)
     bias: np.ndarray    # (out,)
     activation: str
-
-
-@dataclass
-class PositionHead:
-    """
-    X, Y in metres from each member's encoder output, with a sigma.
-
-    Each member's first ``trunk`` layers (its encoder) feed ``heads[m]``,
-    whose two outputs are ``(xy - origin) / scale``; the position is the
-    mean over members. ``sigma[c]`` (metres, per predicted class c) was
-    calibrated on held-out scans so that the circle of radius 2.45 sigma
-    (a 95 % circle for a 2-D Gaussian) holds 95 % of them.
-    """
-
-    origin: np.ndarray            # float64 (2,): metres, in ``columns``
-    scale: float                  # metres per network output unit
-    trunk: int                    # member layers shared with the classes
-    heads: list                   # per member: list of Layer -> 2 outputs
-    sigma: np.ndarray             # float32 (k,): metres per class
-    columns: tuple = ('X', 'Y')   # the data's coordinate columns
-
-    def to_metres(self, outputs):
-        """Return float64 positions from mean head outputs (..., 2)."""
-        return self.origin + self.scale * np.asarray(outputs, np.float64)
 
 
 def _run(x, layers):
@@ -91,31 +63,26 @@ class PlaceModel:
     classes: np.ndarray           # int64 (k, 2): building, floor per output
     provenance: dict = field(default_factory=dict)
     tracking: object = None       # TrackingParams from the file, or None
-    position: PositionHead = None  # None: a classifier only
+    position: object = None       # a Locator; None: a classifier only
+    blank: np.ndarray = field(init=False, repr=False)
 
-    def outputs(self, rssi):
-        """Return (probabilities (n, k), position head outputs or None)."""
+    def __post_init__(self):
+        """Keep the inputs of a scan that detects nothing (the reference)."""
+        empty = np.full((1, len(self.ap_ids)), np.nan, np.float32)
+        self.blank = self.scaler.transform(empty)[0]
+
+    def predict_proba(self, rssi):
+        """Return class probabilities, shape (n, k), for (n, n_aps) RSSI."""
+        return mean_softmax([_run(self._inputs(rssi), layers)
+                             for layers in self.members])
+
+    def _inputs(self, rssi):
         rssi = np.asarray(rssi, dtype=np.float32)
         if rssi.ndim != 2 or rssi.shape[1] != len(self.ap_ids):
             raise ValueError(f'expected RSSI of shape (n, {len(self.ap_ids)})'
                              f' (one column per model AP), got shape '
                              f'{rssi.shape}')
-        inputs = self.scaler.transform(rssi)
-        logits, places = [], []
-        for m, layers in enumerate(self.members):
-            if self.position is None:
-                logits.append(_run(inputs, layers))
-                continue
-            trunk = self.position.trunk
-            encoded = _run(inputs, layers[:trunk])
-            logits.append(_run(encoded, layers[trunk:]))
-            places.append(_run(encoded, self.position.heads[m]))
-        return mean_softmax(logits), (np.mean(places, axis=0)
-                                      if places else None)
-
-    def predict_proba(self, rssi):
-        """Return class probabilities, shape (n, k), for (n, n_aps) RSSI."""
-        return self.outputs(rssi)[0]
+        return self.scaler.transform(rssi)
 
     def predict(self, rssi):
         """Return (building, floor, confidence, probabilities) arrays."""
@@ -124,18 +91,33 @@ class PlaceModel:
         return (self.classes[best, 0], self.classes[best, 1],
                 proba[np.arange(len(best)), best], proba)
 
+    def sparse(self, rssi):
+        """
+        Return (columns, inputs) of one (n_aps,) scan's detected APs.
+
+        The inputs are relative to a scan that detects nothing: what the
+        forward pass and the position search work on.
+        """
+        columns = np.flatnonzero(~np.isnan(rssi))
+        return columns, (self.scaler.transform(rssi[columns], columns)
+                         - self.blank[columns])
+
     def locate(self, rssi):
         """
         Return (class probabilities, xy metres (n, 2), sigma metres (n,)).
 
-        Raises ValueError for a model without a position head.
+        Raises ValueError for a model without a position output.
         """
         if self.position is None:
             raise ValueError('this model has no position output (it was '
                              'trained without coordinates)')
-        proba, heads = self.outputs(rssi)
-        return (proba, self.position.to_metres(heads),
-                self.position.sigma[proba.argmax(axis=1)].astype(np.float64))
+        proba = self.predict_proba(rssi)
+        best = proba.argmax(axis=1)
+        xy = np.empty((len(best), 2))
+        sigma = np.empty(len(best))
+        for i, (row, c) in enumerate(zip(np.asarray(rssi, np.float32), best)):
+            xy[i], sigma[i] = self.position.locate(*self.sparse(row), c)
+        return proba, xy, sigma
 
     @property
     def class_names(self):
@@ -159,25 +141,17 @@ class ScanForward:
     def __init__(self, model):
         self.model = model
         members = model.members
-        n = len(members)
-        empty = np.full((1, len(model.ap_ids)), np.nan, np.float32)
-        self.blank = model.scaler.transform(empty)[0]
         first = [layers[0] for layers in members]
         self.width = first[0].weight.shape[0]
         # every member's first layer side by side: one gather, one product
         self.first_t = np.ascontiguousarray(np.concatenate(
             [layer.weight.T for layer in first], axis=1))
         self.first_bias = np.concatenate(
-            [layer.bias + layer.weight @ self.blank for layer in first])
+            [layer.bias + layer.weight @ model.blank for layer in first])
         self.first_act = ACTIVATIONS[first[0].activation]
         self.rest = [self._stacked([layers[i] for layers in members])
                      for i in range(1, len(members[0]))]
-        position = model.position
-        self.trunk = position.trunk if position else 0
-        self.heads = [] if position is None else [
-            self._stacked([head[i] for head in position.heads])
-            for i in range(len(position.heads[0]))]
-        self.shape = (n, 1, self.width)
+        self.shape = (len(members), 1, self.width)
 
     @staticmethod
     def _stacked(layers):
@@ -186,25 +160,15 @@ class ScanForward:
                 np.stack([layer.bias for layer in layers])[:, None, :],
                 ACTIVATIONS[layers[0].activation])
 
-    def __call__(self, rssi):
-        """Return class probabilities (k,) for one (n_aps,) RSSI vector."""
-        return self.outputs(rssi)[0]
+    def __call__(self, columns, inputs):
+        """
+        Return class probabilities (k,) of one scan.
 
-    def outputs(self, rssi):
-        """Return (probabilities (k,), the position head's 2 outputs or None)."""
-        columns = np.flatnonzero(~np.isnan(rssi))
-        delta = self.model.scaler.transform(rssi[columns], columns) - \
-            self.blank[columns]
-        x = self.first_act(self.first_bias + delta @ self.first_t[columns])
+        ``columns``, ``inputs``: its detected APs, from
+        :meth:`PlaceModel.sparse`.
+        """
+        x = self.first_act(self.first_bias + inputs @ self.first_t[columns])
         x = x.reshape(self.shape)
-        place = None
-        for done, (weight_t, bias, activation) in enumerate(self.rest, 1):
-            if done == self.trunk:
-                place = self._head(x)
+        for weight_t, bias, activation in self.rest:
             x = activation(np.matmul(x, weight_t) + bias)
-        return mean_softmax(x[:, 0, :]), place
-
-    def _head(self, x):
-        for weight_t, bias, activation in self.heads:
-            x = activation(np.matmul(x, weight_t) + bias)
-        return x[:, 0, :].mean(axis=0)
+        return mean_softmax(x[:, 0, :])

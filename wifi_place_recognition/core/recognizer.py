@@ -47,9 +47,10 @@ class PlaceRecognizer:
     The level is WARN when the confidence is below ``min_confidence`` or
     fewer than ``min_known_aps`` APs of the scan are known to the model.
     :meth:`classify` raises :class:`ScanRejected` for a scan it cannot use.
-    ``forward`` turns a model-ordered RSSI vector into class probabilities
-    and the position head's outputs (or None), by default the numpy
-    :meth:`ScanForward.outputs` of ``model``. With a
+    ``forward(columns, inputs)`` turns a scan's detected APs
+    (:meth:`PlaceModel.sparse`) into class probabilities (default: the numpy
+    :class:`ScanForward` of ``model``). A model with a position output
+    also places the scan (:class:`.locator.Locator`). With a
     ``tracker`` (:meth:`track`), scans given a time are tracked over time
     and the answer is the tracked one.
     """
@@ -57,7 +58,7 @@ class PlaceRecognizer:
     def __init__(self, model, min_confidence=0.5, min_known_aps=3,
                  max_aps=4096, forward=None):
         self.model = model
-        self.forward = forward or ScanForward(model).outputs
+        self.forward = forward or ScanForward(model)
         self.mapper = ScanMapper(model.ap_ids, max_aps)
         self.min_confidence = min_confidence
         self.min_known_aps = min_known_aps
@@ -75,15 +76,15 @@ class PlaceRecognizer:
         ``time`` (s) is when the scan was taken; tracking needs it.
         """
         scan = self.mapper.map(names, rssi)
-        proba, head = self.forward(scan.rssi)
+        columns, inputs = self.model.sparse(scan.rssi)
+        proba = self.forward(columns, inputs)
         best = int(proba.argmax())
         scan_building, scan_floor = (int(v) for v in self.model.classes[best])
         scan_confidence = float(proba[best])
         xy = cov = None
         sigma = float('nan')
-        if head is not None:
-            xy = self.model.position.to_metres(head)
-            sigma = float(self.model.position.sigma[best])
+        if self.model.position is not None:
+            xy, sigma = self.model.position.locate(columns, inputs, best)
             cov = np.eye(2) * sigma ** 2
         scan_xy = xy
         if self.tracker is None or time is None:

@@ -34,8 +34,7 @@ class TrainConfig:
     epochs: int = 30              # the most; cross-validation picks fewer
     batch_size: int = 256
     learning_rate: float = 2e-3
-    position_layers: tuple = (128,)  # position head (data with X, Y)
-    position_weight: float = 1.0  # its loss weight; 0: no position output
+    neighbours: int = 0           # k of the position k-NN; 0: by the folds
     folds: int = 4                # cross-validation folds; 0: no selection
     grouping: str = 'auto'        # what a fold holds out (see selection)
     ensemble: int = 3
@@ -46,11 +45,9 @@ class TrainConfig:
         """Check values so that a bad option fails before training starts."""
         self.sae_layers = tuple(int(n) for n in self.sae_layers)
         self.classifier_layers = tuple(int(n) for n in self.classifier_layers)
-        self.position_layers = tuple(int(n) for n in self.position_layers)
         checks = [
             (self.sae_layers and all(n > 0 for n in self.sae_layers +
-                                     self.classifier_layers +
-                                     self.position_layers),
+                                     self.classifier_layers),
              'layer sizes must be positive (and sae_layers not empty)'),
             (self.activation in ACTIVATION_NAMES,
              f'activation must be one of {ACTIVATION_NAMES}'),
@@ -68,7 +65,7 @@ class TrainConfig:
              >= 0 and 0 <= self.augment_dropout < 1,
              'augmentation amounts must be >= 0 (dropout < 1)'),
             (self.threads >= 0, 'threads must be >= 0'),
-            (self.position_weight >= 0, 'position_weight must be >= 0'),
+            (self.neighbours >= 0, 'neighbours must be >= 0'),
         ]
         for ok, message in checks:
             if not ok:

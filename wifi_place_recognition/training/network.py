@@ -18,13 +18,9 @@ def dense(sizes, activation, dropout=0.0):
 
 
 class PlaceNet(nn.Module):
-    """
-    Encoder (pre-trained as an SAE) + classifier; outputs logits.
+    """Encoder (pre-trained as an SAE) + classifier; outputs logits."""
 
-    With ``position`` a second head on the same encoder outputs X, Y.
-    """
-
-    def __init__(self, n_inputs, n_classes, config, position=False):
+    def __init__(self, n_inputs, n_classes, config):
         super().__init__()
         self.activation = config.activation
         self.encoder = nn.Sequential(*dense(
@@ -33,21 +29,10 @@ class PlaceNet(nn.Module):
         self.head = nn.Sequential(
             *dense(head, config.activation, config.dropout),
             nn.Linear(head[-1], n_classes))
-        self.position = None
-        if position:
-            sizes = (config.sae_layers[-1],) + config.position_layers
-            self.position = nn.Sequential(
-                *dense(sizes, config.activation, config.dropout),
-                nn.Linear(sizes[-1], 2))
 
     def forward(self, x):
         """Return logits."""
         return self.head(self.encoder(x))
-
-    def both(self, x):
-        """Return (logits, position outputs) from one encoder pass."""
-        encoded = self.encoder(x)
-        return self.head(encoded), self.position(encoded)
 
     def autoencoder(self):
         """Return encoder + a fresh mirrored decoder, for pre-training."""
@@ -58,17 +43,9 @@ class PlaceNet(nn.Module):
         return nn.Sequential(self.encoder, *decoder)
 
     def frozen_layers(self):
-        """Return encoder + classifier as numpy :class:`Layer` objects."""
-        return _frozen(list(self.encoder) + list(self.head), self.activation)
-
-    def frozen_position(self):
-        """Return the position head as numpy :class:`Layer` objects."""
-        return _frozen(self.position, self.activation)
-
-
-def _frozen(modules, activation):
-    linears = [m for m in modules if isinstance(m, nn.Linear)]
-    return [Layer(m.weight.detach().numpy().copy(),
-                  m.bias.detach().numpy().copy(),
-                  'linear' if m is linears[-1] else activation)
-            for m in linears]
+        """Return the dense layers as numpy :class:`Layer` objects."""
+        linears = [m for m in self.modules() if isinstance(m, nn.Linear)]
+        return [Layer(m.weight.detach().numpy().copy(),
+                      m.bias.detach().numpy().copy(),
+                      'linear' if m is linears[-1] else self.activation)
+                for m in linears]

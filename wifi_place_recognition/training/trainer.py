@@ -19,7 +19,8 @@ import torch
 from torch import nn
 
 from ..core.metrics import class_index
-from ..core.model import PlaceModel, PositionHead, R95
+from ..core.locator import calibrated_sigma, Locator
+from ..core.model import PlaceModel
 from ..core.preprocessing import RssiScaler
 from ..data.fingerprints import check_trainable
 from .augment import ScanAugmenter
@@ -73,36 +74,26 @@ class _Inputs:
             yield idx, x[idx]
 
 
-def _score(net, held_out):
-    """Return the held-out predicted classes and position errors (units)."""
-    x, _, position = held_out
+def _predicted(net, x):
+    """Return the classes ``net`` predicts for inputs ``x``."""
     net.eval()
     with torch.no_grad():
-        if position is None:
-            predicted, error = net(x).argmax(dim=1), None
-        else:
-            logits, xy = net.both(x)
-            predicted = logits.argmax(dim=1)
-            error = torch.linalg.vector_norm(xy - position, dim=1).numpy()
+        predicted = net(x).argmax(dim=1).numpy()
     net.train()
-    return predicted.numpy(), error
+    return predicted
 
 
-def fit_network(rssi, targets, n_classes, scaler, config, epochs, seed,
+def fit_network(rssi, y, n_classes, scaler, config, epochs, seed,
                 held_out=None, log=print):
     """
-    Train one network on ``rssi`` (NaN = not detected).
+    Train one network on ``rssi`` (NaN = not detected) and class indices.
 
-    ``targets`` = (class indices, scaled positions or None). With
-    ``held_out`` = (inputs, class indices, scaled positions or None), also
-    return, after every epoch, the held-out predicted classes and position
-    errors. Returns (net, [(classes, errors)] per epoch).
+    With ``held_out`` = (inputs, class indices), also return the held-out
+    predicted classes after every epoch. Returns (net, [classes]).
     """
-    y, position = targets
     with _torch_state(config.threads, seed):
         inputs = _Inputs(rssi, scaler, config, seed)
-        net = PlaceNet(rssi.shape[1], n_classes, config,
-                       position=position is not None)
+        net = PlaceNet(rssi.shape[1], n_classes, config)
         sae = net.autoencoder()
         optimiser = torch.optim.Adam(sae.parameters(),
                                      lr=config.learning_rate)
@@ -118,41 +109,27 @@ def fit_network(rssi, targets, n_classes, scaler, config, epochs, seed,
                 f'reconstruction mse {total / len(rssi):.4f}')
         optimiser = torch.optim.Adam(net.parameters(),
                                      lr=config.learning_rate)
-        scores = []
+        predictions = []
         for epoch in range(1, epochs + 1):
             total = 0.0
             for idx, x in inputs.epoch():
                 optimiser.zero_grad()
-                if position is None:
-                    loss = nn.functional.cross_entropy(net(x), y[idx])
-                else:
-                    logits, xy = net.both(x)
-                    loss = nn.functional.cross_entropy(logits, y[idx]) + \
-                        config.position_weight * \
-                        nn.functional.mse_loss(xy, position[idx])
+                loss = nn.functional.cross_entropy(net(x), y[idx])
                 loss.backward()
                 optimiser.step()
                 total += loss.item() * len(idx)
             line = f'  epoch {epoch:3d}/{epochs}  loss {total / len(rssi):.4f}'
             if held_out is not None:
-                scores.append(_score(net, held_out))
-                right = (scores[-1][0] == held_out[1].numpy()).mean()
+                predictions.append(_predicted(net, held_out[0]))
+                right = (predictions[-1] == held_out[1].numpy()).mean()
                 line += f'  held-out building+floor {right:.4f}'
             log(line)
         net.eval()
-    return net, scores
+    return net, predictions
 
 
-class _Positions:
-    """Coordinates as network targets: relative to an origin, scaled."""
-
-    def __init__(self, xy):
-        self.origin = xy.mean(axis=0)
-        self.scale = float(np.sqrt(((xy - self.origin) ** 2).mean())) or 1.0
-
-    def targets(self, xy):
-        return torch.from_numpy(((xy - self.origin) / self.scale)
-                                .astype(np.float32))
+#: k of the position k-NN that cross-validation chooses from.
+NEIGHBOURS = (3, 5, 7, 10)
 
 
 def cross_validate(fp, y, n_classes, config, log=print):
@@ -160,43 +137,34 @@ def cross_validate(fp, y, n_classes, config, log=print):
     Return the selection summary: per-fold curves, their mean, the choice.
 
     Each fold fits its own scaler and network on the scans it keeps and
-    scores the groups it holds out after every epoch: building+floor
-    accuracy, and with positions the error in metres, whose per-class 95th
-    percentiles at the chosen epoch calibrate the position sigma.
+    scores the groups it holds out after every epoch (building+floor
+    accuracy). With positions, each held-out scan is then placed among the
+    kept scans of the class predicted at the chosen epoch count: that
+    chooses k and calibrates the position sigma per class.
     """
     folds = grouped_folds(fp, y.numpy(), config.folds, config.grouping,
                           config.seed)
     log(f'cross-validation: {len(folds.held_out)} folds of whole '
         f'{folds.grouping} groups ({folds.groups} groups'
         + (f'; {folds.note}' if folds.note else '') + ')')
-    positions = _positions(fp, config)
     runs, fold_info = [], []
     for k, held in enumerate(folds.held_out):
         scaler = _scaler(config).fit(fp.rssi[~held])
-        target = None if positions is None else \
-            positions.targets(fp.position)
         held_out = (torch.from_numpy(scaler.transform(fp.rssi[held])),
-                    y[held], None if target is None else target[held])
+                    y[held])
         log(f'fold {k + 1}/{len(folds.held_out)}: {int((~held).sum())} '
             f'scans train, {int(held.sum())} held out')
-        _, scores = fit_network(
-            fp.rssi[~held], (y[~held], None if target is None else
-                             target[~held]),
-            n_classes, scaler, config, config.epochs,
-            config.seed + 1000 * (k + 1), held_out, log)
-        runs.append((held, scores))
+        _, predictions = fit_network(
+            fp.rssi[~held], y[~held], n_classes, scaler, config,
+            config.epochs, config.seed + 1000 * (k + 1), held_out, log)
+        runs.append((held, scaler, predictions))
         fold_info.append({'held_out_scans': int(held.sum()),
                           'classes': sorted(set(y[held].tolist()))})
     truth = y.numpy()
-    curves = np.array([[(c == truth[held]).mean() for c, _ in scores]
-                       for held, scores in runs])
+    curves = np.array([[(c == truth[held]).mean() for c in predictions]
+                       for held, _, predictions in runs])
     mean = curves.mean(axis=0)
     best = int(np.argmax(mean))
-    if positions is not None:  # of the epochs as accurate, the best placed
-        error = np.mean([[e.mean() for _, e in scores]
-                         for _, scores in runs], axis=0)
-        tied = np.flatnonzero(mean >= mean[best] - ACCURACY_TIE)
-        best = int(tied[np.argmin(error[tied])])
     summary = {'grouping': folds.grouping, 'note': folds.note,
                'groups': folds.groups, 'never_held_out': folds.never_held_out,
                'folds': fold_info, 'curves': np.round(curves, 5).tolist(),
@@ -204,48 +172,59 @@ def cross_validate(fp, y, n_classes, config, log=print):
                'accuracy_mean': float(mean[best]),
                'accuracy_min': float(curves[:, best].min()),
                'accuracy_max': float(curves[:, best].max())}
-    if positions is not None:
-        errors = np.concatenate([s[best][1] for _, s in runs]) * \
-            positions.scale
-        predicted = np.concatenate([s[best][0] for _, s in runs])
-        summary.update(position_mean_error_m=float(errors.mean()),
-                       position_median_error_m=float(np.median(errors)),
-                       sigma_m=_calibrated_sigma(errors, predicted,
-                                                 n_classes).tolist())
+    if fp.position is not None:
+        summary.update(_cross_validate_position(
+            fp, truth, n_classes, config,
+            [(held, scaler, predictions[best])
+             for held, scaler, predictions in runs], log))
     return summary
 
 
-#: Mean held-out accuracies this close count as equal when choosing the
-#: epoch count on position error (below the fold-to-fold noise).
-ACCURACY_TIE = 0.002
+def _cross_validate_position(fp, y, n_classes, config, runs, log):
+    """Return the chosen k, its held-out errors (m) and sigma per class."""
+    candidates = (config.neighbours,) if config.neighbours else NEIGHBOURS
+    errors = {k: [] for k in candidates}
+    predicted = []
+    for held, scaler, classes in runs:
+        locator = _locator(fp.subset(~held), y[~held], n_classes, scaler)
+        rows = list(_sparse_inputs(fp.rssi[held], scaler))
+        truth = fp.position[held]
+        for k in candidates:
+            xy = np.array([locator.locate(columns, inputs, c, k)[0]
+                           for (columns, inputs), c in zip(rows, classes)])
+            errors[k].append(np.linalg.norm(xy - truth, axis=1))
+        predicted.append(classes)
+    mean = {k: float(np.nanmean(np.concatenate(e)))
+            for k, e in errors.items()}
+    k = min(mean, key=mean.get)
+    error = np.concatenate(errors[k])
+    placed = np.isfinite(error)
+    log(f'position: k={k}, held-out mean error {mean[k]:.2f} m ('
+        + ', '.join(f'k={n}: {e:.2f}' for n, e in mean.items()) + ')')
+    return {'neighbours': k, 'position_mean_error_m': mean[k],
+            'position_median_error_m': float(np.median(error[placed])),
+            'sigma_m': calibrated_sigma(
+                error[placed], np.concatenate(predicted)[placed],
+                n_classes).tolist()}
 
-def _calibrated_sigma(errors, predicted, n_classes, min_scans=30):
-    """
-    Return a sigma (m) per class: its held-out 95th percentile error / R95.
 
-    A class predicted for fewer than ``min_scans`` held-out scans gets the
-    value of all scans.
-    """
-    overall = np.quantile(errors, 0.95) / R95
-    sigma = np.full(n_classes, overall)
-    for c in range(n_classes):
-        mine = errors[predicted == c]
-        if len(mine) >= min_scans:
-            sigma[c] = np.quantile(mine, 0.95) / R95
-    return np.maximum(sigma, 0.1)
+def _sparse_inputs(rssi, scaler):
+    """Yield (columns, inputs relative to an empty scan) of each scan."""
+    blank = scaler.transform(np.full((1, rssi.shape[1]), np.nan,
+                                     np.float32))[0]
+    for row in rssi:
+        columns = np.flatnonzero(~np.isnan(row))
+        yield columns, scaler.transform(row[columns], columns) - \
+            blank[columns]
 
 
-def _training_sigma(nets, x, target, n_classes):
-    x = torch.from_numpy(x)
-    scores = [_score(net, (x, None, target)) for net in nets]
-    return _calibrated_sigma(np.mean([e for _, e in scores], axis=0),
-                             scores[0][0], n_classes)
-
-
-def _positions(fp, config):
-    if fp.position is None or not config.position_weight:
-        return None
-    return _Positions(fp.position)
+def _locator(fp, y, n_classes, scaler, neighbours=5, sigma=None):
+    """Return a :class:`Locator` of the scans of ``fp`` (class ``y``)."""
+    dense = np.zeros(fp.rssi.shape, np.float32)
+    for i, (columns, inputs) in enumerate(_sparse_inputs(fp.rssi, scaler)):
+        dense[i, columns] = inputs
+    return Locator.build(dense, y, fp.position, n_classes, neighbours,
+                         sigma, fp.position_columns)
 
 
 def _scaler(config):
@@ -279,16 +258,22 @@ def train(fp, config, log=print):
         log(f'cross-validated building+floor {s["accuracy_mean"]:.4f} '
             f'({s["accuracy_min"]:.4f}-{s["accuracy_max"]:.4f} over folds) '
             f'at {report.epochs} epochs')
-    positions = _positions(fp, config)
-    target = None if positions is None else positions.targets(fp.position)
     scaler = _scaler(config).fit(fp.rssi)
     nets = []
     for k in range(config.ensemble):
         log(f'member {k + 1}/{config.ensemble}: all {len(fp)} scans, '
             f'{report.epochs} epochs')
-        nets.append(fit_network(fp.rssi, (y, target), len(classes), scaler,
-                                config, report.epochs, config.seed + k,
+        nets.append(fit_network(fp.rssi, y, len(classes), scaler, config,
+                                report.epochs, config.seed + k,
                                 log=log)[0])
+    position = None
+    if fp.position is not None and config.folds:
+        position = _locator(fp, y.numpy(), len(classes), scaler,
+                            report.selection['neighbours'],
+                            report.selection['sigma_m'])
+    elif fp.position is not None:
+        log('no position output: its uncertainty is calibrated on the '
+            'folds (folds 0)')
     report.seconds = time.perf_counter() - start
     provenance = {
         'config': asdict(config),
@@ -302,17 +287,6 @@ def train(fp, config, log=print):
         'versions': {'torch': torch.__version__, 'numpy': np.__version__},
         'created': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
     }
-    position = None
-    if positions is not None:
-        sigma = report.selection.get('sigma_m')
-        if sigma is None:  # nothing held out: training errors (optimistic)
-            sigma = _training_sigma(nets, scaler.transform(fp.rssi), target,
-                                    len(classes)) * positions.scale
-            provenance['position_sigma'] = 'training scans (no folds)'
-        position = PositionHead(
-            positions.origin, positions.scale, len(config.sae_layers),
-            [net.frozen_position() for net in nets],
-            np.asarray(sigma, np.float32), fp.position_columns)
     model = PlaceModel(fp.ap_ids, scaler,
                        [net.frozen_layers() for net in nets], classes,
                        provenance, position=position)

@@ -1,0 +1,54 @@
+"""The position k-NN: exact neighbours, and its arrays in the model file."""
+
+import numpy as np
+import pytest
+from wifi_place_recognition.core.artifact import (load_model,
+                                                  ModelFileError, save_model)
+from wifi_place_recognition.core.locator import Locator
+
+
+def _references(rng, n=300, n_aps=40, n_classes=3):
+    inputs = np.where(rng.random((n, n_aps)) < 0.2,
+                      rng.normal(1.0, 0.5, (n, n_aps)), 0.0)
+    classes = rng.integers(0, n_classes, n)
+    xy = rng.uniform(-7700, -7600, (n, 2)) + [0, 4864900]
+    return inputs.astype(np.float32), classes, xy
+
+
+def test_locate_is_distance_weighted_knn_within_the_class():
+    rng = np.random.default_rng(0)
+    inputs, classes, xy = _references(rng)
+    locator = Locator.build(inputs, classes, xy, 3, neighbours=4,
+                            sigma=[1.0, 2.0, 3.0])
+    for _ in range(20):
+        query = np.where(rng.random(40) < 0.3, rng.normal(1, 0.5, 40), 0.0)
+        columns = np.flatnonzero(query)
+        c = int(rng.integers(0, 3))
+        mine = np.flatnonzero(classes == c)
+        distance = np.linalg.norm(inputs[mine] - query, axis=1)
+        nearest = np.argsort(distance)[:4]
+        weight = 1 / distance[nearest]
+        expected = weight @ xy[mine[nearest]] / weight.sum()
+        got, sigma = locator.locate(columns, query[columns], c)
+        np.testing.assert_allclose(got, expected, atol=1e-3)
+        assert sigma == c + 1.0
+
+
+def test_locator_in_the_model_file_and_tampered_indices(synthetic,
+                                                        tmp_path):
+    model = load_model(synthetic[1])
+    rng = np.random.default_rng(1)
+    inputs, classes, xy = _references(rng, n_aps=len(model.ap_ids),
+                                      n_classes=len(model.classes))
+    model.position = Locator.build(inputs, classes, xy, len(model.classes),
+                                   5, np.ones(len(model.classes)))
+    save_model(model, tmp_path / 'm.npz')
+    loaded = load_model(tmp_path / 'm.npz').position
+    np.testing.assert_array_equal(loaded.origin, model.position.origin)
+    np.testing.assert_array_equal(loaded.entry_ref, model.position.entry_ref)
+    # A reference index pointing into another class is refused on loading.
+    model.position.entry_ref = model.position.entry_ref.copy()
+    model.position.entry_ref[0] = len(xy) - 1
+    save_model(model, tmp_path / 'bad.npz')
+    with pytest.raises(ModelFileError, match='outside its class'):
+        load_model(tmp_path / 'bad.npz')
