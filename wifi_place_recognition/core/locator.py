@@ -4,10 +4,11 @@ Position from one scan: k-NN among the recognised floor's reference scans.
 Distance-weighted k-NN among the reference scans of the building/floor the
 classifier recognised. References live in the model's input space,
 relative to a scan that detects nothing (where every representation and
-scaling puts an undetected AP at a constant), so a scan is sparse: only its detected APs are non-zero. They are
-stored by AP column (for each class and AP, the references that detected
-it), so a query touches only the references that share one of its APs, a
-few thousand numbers. Coordinates are kept relative to a float64 origin.
+scaling puts an undetected AP at a constant), so a scan is sparse: only
+its detected APs are non-zero. They are stored by AP column (for each
+class and AP, the references that detected it), so a query touches only
+the references that share one of its APs, a few thousand numbers.
+Coordinates are kept relative to a float64 origin.
 """
 
 from dataclasses import dataclass
