@@ -1,6 +1,8 @@
 """
-Accuracy benchmark: the default and the paper's recipe against k-NN and a
-random forest, several seeds, one run; or a cross-validated search.
+Accuracy benchmark: recipes against k-NN and a random forest, several seeds.
+
+The default and the paper's recipe against k-NN and a random forest, in one
+run; or (``--suite search``) the cross-validation of variants alone.
 
 Protocol (``--suite default``, ``table1``, ``architecture``): each recipe is
 trained by the documented command (``train_model``, in a subprocess whose

@@ -7,7 +7,6 @@ from dataclasses import fields
 from ..core.artifact import save_model
 from ..core.evaluation import evaluate
 from ..training.config import TrainConfig
-from ..training.trainer import train
 from .common import (add_data_arguments, add_download_arguments, main_wrapper,
                      print_report, read_data)
 
@@ -70,7 +69,7 @@ def main(argv=None):
             print(line, file=sys.stderr, flush=True)
 
     print(train_fp.summary(), file=sys.stderr, flush=True)
-    model, _, report = train(train_fp, config, log)
+    model, _, report = _trainer()(train_fp, config, log)
     save_model(model, args.output)
     print(f'wrote {args.output}: {len(model.ap_ids)} APs, '
           f'{len(model.classes)} classes, {len(model.members)} network(s) '
@@ -85,6 +84,17 @@ def main(argv=None):
     if test_fp is not None:
         print_report(evaluate(model, test_fp), model, test_fp.source)
     return 0
+
+
+def _trainer():
+    """Return the torch trainer; a clear error where torch is missing."""
+    try:
+        from ..training.trainer import train
+    except ImportError as exc:
+        raise ValueError(f'training needs torch ({exc}); install it with '
+                         f'pip install "torch==2.13.0" (or the package\'s '
+                         f'[train] extra)') from None
+    return train
 
 
 if __name__ == '__main__':

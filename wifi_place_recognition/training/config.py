@@ -31,7 +31,7 @@ class TrainConfig:
     augment_noise: float = 2.0    # dB, normal std per reading
     augment_dropout: float = 0.1  # probability to drop a detected AP
     sae_epochs: int = 10
-    epochs: int = 30              # the most; cross-validation picks fewer
+    epochs: int = 20              # the most; cross-validation picks fewer
     batch_size: int = 256
     learning_rate: float = 2e-3
     neighbours: int = 0           # k of the position k-NN; 0: by the folds
