@@ -99,7 +99,7 @@ def test_failed_write_keeps_the_previous_file(synthetic, tmp_path,
     def disk_full(f, **arrays):
         f.write(b'PK partial')
         raise OSError(28, 'No space left on device')
-    monkeypatch.setattr(np, 'savez', disk_full)
+    monkeypatch.setattr(np, 'savez_compressed', disk_full)
     with pytest.raises(OSError):
         save_model(model, path)
     assert path.read_bytes() == before

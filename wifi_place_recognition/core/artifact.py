@@ -69,7 +69,7 @@ def save_model(model, path):
     header['sha256'] = _digest(header, arrays)
     arrays['header'] = np.frombuffer(json.dumps(header).encode(), np.uint8)
     with atomic_write(path) as f:
-        np.savez(f, **arrays)
+        np.savez_compressed(f, **arrays)
 
 
 def _layer_specs(layers, prefix, arrays):

@@ -128,6 +128,19 @@ def fit_network(rssi, y, n_classes, scaler, config, epochs, seed,
     return net, predictions
 
 
+def _best_epoch(mean, window=3):
+    """
+    Return the index of the best epoch of a mean held-out curve.
+
+    The curve is smoothed over ``window`` epochs first: single epochs move
+    by more than the curve does over many (fold and epoch noise).
+    """
+    if len(mean) < window:
+        return int(np.argmax(mean))
+    smooth = np.convolve(mean, np.ones(window) / window, mode='valid')
+    return int(np.argmax(smooth)) + window // 2
+
+
 #: k of the position k-NN that cross-validation chooses from.
 NEIGHBOURS = (3, 5, 7, 10)
 
@@ -164,7 +177,7 @@ def cross_validate(fp, y, n_classes, config, log=print):
     curves = np.array([[(c == truth[held]).mean() for c in predictions]
                        for held, _, predictions in runs])
     mean = curves.mean(axis=0)
-    best = int(np.argmax(mean))
+    best = _best_epoch(mean)
     summary = {'grouping': folds.grouping, 'note': folds.note,
                'groups': folds.groups, 'never_held_out': folds.never_held_out,
                'folds': fold_info, 'curves': np.round(curves, 5).tolist(),
