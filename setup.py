@@ -19,11 +19,14 @@ setup(
     python_requires='>=3.10',
     install_requires=['setuptools', 'numpy'],
     # The node needs numpy only; torch trains (train_model), scikit-learn
-    # runs the benchmark baselines; requirements.txt is the development set.
+    # runs the benchmark baselines, matplotlib draws evaluate_model --plot;
+    # requirements.txt is the development set.
     extras_require={
         'train': ['torch'],
         'bench': ['torch', 'scikit-learn'],
-        'test': ['pytest', 'flake8', 'pydocstyle', 'torch'],
+        'plot': ['matplotlib', 'scikit-learn'],
+        'test': ['pytest', 'flake8', 'pydocstyle', 'torch', 'matplotlib',
+                 'scikit-learn'],
     },
     zip_safe=True,
     maintainer='wifi_place_recognition developers',

@@ -59,6 +59,14 @@ def handlers_installed(pid):
     return bool(caught >> (signal.SIGTERM - 1) & 1)
 
 
+def rclpy_loaded(pid):
+    """Return True once process ``pid`` has loaded rcl (imported rclpy)."""
+    try:
+        return 'librcl.so' in Path(f'/proc/{pid}/maps').read_text()
+    except OSError:
+        return False
+
+
 def _command(kind, folder):
     """Return (argv, env) that start ``kind`` for one run in ``folder``."""
     exe = str(Path(sys.executable).parent / kind)
@@ -117,7 +125,9 @@ class Harness:
         Start ``kind``, send ``signals`` in ``phase``; return the outcome.
 
         The outcome is a dict: exit code (None if it hung), traceback seen,
-        the delays used and the seconds from the first signal to the exit.
+        the delays used, the seconds from the first signal to the exit, and
+        when the process caught the signals itself (seconds after start,
+        and whether that was before it imported rclpy).
         """
         folder.mkdir(parents=True, exist_ok=True)
         argv, env = _command(kind, folder)
@@ -129,6 +139,7 @@ class Harness:
         try:
             self.wait(20, lambda: handlers_installed(proc.pid))
             guarded = time.monotonic() - started
+            before_rclpy = not rclpy_loaded(proc.pid)
             if phase == 'startup':
                 self.wait(rng.uniform(0, 0.6))
             else:
@@ -154,7 +165,7 @@ class Harness:
         return {'kind': kind, 'phase': phase,
                 'signals': [s.name for s in signals], 'delays': delays,
                 'exit_code': code, 'traceback': 'Traceback' in text,
-                'guarded_after_s': guarded,
+                'guarded_after_s': guarded, 'guarded_before_rclpy': before_rclpy,
                 'exit_after_s': time.monotonic() - first,
                 'log': text[-2000:]}
 

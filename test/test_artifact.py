@@ -1,5 +1,6 @@
 """The model file: round trip, and refusal of every kind of bad file."""
 
+from dataclasses import asdict
 import json
 import os
 import stat
@@ -10,6 +11,7 @@ from wifi_place_recognition.core.artifact import (
     load_model, ModelFileError, save_model)
 from fuzz import hostile_model_files
 from wifi_place_recognition.core.resources import default_model_path
+from wifi_place_recognition.training.config import TrainConfig
 
 
 def test_round_trip_keeps_predictions(synthetic, tmp_path):
@@ -43,7 +45,12 @@ def test_shipped_model_loads_with_its_provenance():
     assert len(model.ap_ids) == 520 and len(model.classes) == 13
     prov = model.provenance
     assert prov['training_data']['sha256'].startswith('45ca0128')
-    assert prov['selection']['held_out'] == 'phone'
+    assert prov['selection']['grouping'] == 'device'
+    # trained by the documented command: the default recipe
+    assert prov['config'] == json.loads(json.dumps(asdict(TrainConfig())))
+    assert len(model.members) == TrainConfig().ensemble
+    assert model.position.columns == ('LONGITUDE', 'LATITUDE')
+    assert 4864000 < model.position.origin[1] < 4866000   # UTM, float64
 
 
 def _header_and_arrays(path):

@@ -15,7 +15,8 @@ from wifi_place_recognition.ros.messages import status_values
 
 @pytest.fixture
 def running(ros, synthetic, tmp_path, request):
-    """Start a node on the synthetic model; yield (client, proc, model).
+    """
+    Start a node on the synthetic model; yield (client, proc, model).
 
     Tracking is off: these tests check each scan's own answer (tracking:
     test_tracking_node).

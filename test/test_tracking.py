@@ -300,7 +300,7 @@ def test_recognizer_answers_tracked_and_keeps_the_scan_answer(synthetic):
     k = len(model.classes)
     evidence = iter([scan(0, 0.9, k)] * 10 + [scan(1, 0.9, k)]
                     + [scan(0, 0.9, k)] * 3)
-    recognizer = PlaceRecognizer(model, forward=lambda rssi: next(evidence))
+    recognizer = PlaceRecognizer(model, forward=lambda columns, inputs: next(evidence))
     recognizer.track(True, 600.0)
     names = model.ap_ids[:5]
     places = [recognizer.classify(names, [-60] * 5, 5.0 * i)
