@@ -94,6 +94,9 @@ def test_bad_scans_are_rejected_counted_and_survived(running):
     assert values['rejected/implausible_rssi'] == '2'
     assert values['rejected/non_finite'] == '2'
     assert counts['answered'] >= 2      # the probe and the good scan
+    selection = model.provenance['selection']
+    assert float(values['model_cross_validated_building_floor_accuracy']) \
+        == pytest.approx(selection['accuracy_mean'])
 
 
 def test_thresholds_change_at_runtime_and_bad_values_are_refused(running):

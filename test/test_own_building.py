@@ -1,6 +1,7 @@
 """Your own building: scan sources, recording, and the whole loop over ROS."""
 
 import os
+import re
 from pathlib import Path
 import signal
 import threading
@@ -217,8 +218,8 @@ def test_scanner_node_publishes_fresh_readings_and_reports_errors(
         assert wait_until(lambda: _statuses(diags, 'scanner_ok'), 5, ros)
         status = _statuses(diags, 'scanner_ok')[-1]
         assert status.level == DiagnosticStatus.OK
-        assert '1 APs from iw (7 older than 0.2 s dropped)' in \
-            status.message, status.message
+        assert re.search(r'1 APs from iw \(7 older than 0\.\d s dropped\)',
+                         status.message), status.message
         assert int(status_values(status)['stale_readings']) >= 7
         assert client.set_param('max_age', 5.0).successful
         assert not client.set_param('max_age', -1.0).successful
@@ -266,7 +267,8 @@ def test_scanner_node_stays_responsive_while_iw_hangs(
         assert wait_until(lambda: pids.exists(), 10, ros)
         t0 = time.monotonic()
         assert client.set_param('max_age', 3.0).successful
-        assert time.monotonic() - t0 < 1.0
+        # well before the hanging command's 2.5 s timeout ends
+        assert time.monotonic() - t0 < 2.0
         assert wait_until(lambda: any(
             float(status_values(s)['scan_running_s']) >= 1.0
             for s in _statuses(diags, 'scanner_hang')), 5, ros)

@@ -63,16 +63,25 @@ def test_representations_round_trip_through_the_model_file(
                                   model.predict_proba(rssi))
 
 
+def _augmented(augmenter):
+    rows, cols, values = augmenter.readings()
+    assert (np.diff(rows) >= 0).all()
+    out = np.full(augmenter.shape, np.nan, np.float32)
+    out[rows, cols] = values
+    return out
+
+
 def test_augment_is_seeded_and_stays_plausible():
     config = TrainConfig(augment_offset=10, augment_gain=0.1,
                          augment_noise=2, augment_dropout=0.2)
     rssi = np.full((50, 30), -70, np.float32)
     rssi[:, 20:] = np.nan
-    a = ScanAugmenter(rssi, config, seed=1)()
-    b = ScanAugmenter(rssi, config, seed=1)()
+    a = _augmented(ScanAugmenter(rssi, config, seed=1))
+    b = _augmented(ScanAugmenter(rssi, config, seed=1))
     np.testing.assert_array_equal(a, b)
     augmenter = ScanAugmenter(rssi, config, seed=1)
-    assert not np.array_equal(augmenter(), augmenter(), equal_nan=True)
+    assert not np.array_equal(_augmented(augmenter), _augmented(augmenter),
+                              equal_nan=True)
     assert np.isnan(a[:, 20:]).all()
     detected = a[np.isfinite(a)]
     assert detected.max() <= 0 and detected.min() >= -110
@@ -88,3 +97,16 @@ def test_recognizer_levels(synthetic):
     assert few.level == WARN and 'only 1 known APs' in few.message
     recognizer.min_confidence = 1.0
     assert recognizer.classify(ids[:3], [-60] * 3).level == WARN
+
+
+def test_estimators_check_fitted_and_width(synthetic):
+    with pytest.raises(ValueError, match='not fitted yet'):
+        RssiScaler().transform(np.full((1, 3), -60.0))
+    model = load_model(synthetic[1])
+    width = len(model.ap_ids)
+    with pytest.raises(ValueError, match=rf'shape \(n, {width}\).*got shape '
+                                         r'\(1, 1\)'):
+        model.predict([[-60.0]])
+    scaler = RssiScaler().fit(np.full((4, 3), -60.0))
+    with pytest.raises(ValueError, match=r'expected 3 AP columns.*\(1, 2\)'):
+        scaler.transform(np.full((1, 2), -60.0))

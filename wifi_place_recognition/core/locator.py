@@ -79,26 +79,40 @@ class Locator:
         Return (xy metres (2,), sigma m) of one scan of class ``c``.
 
         ``columns``/``values``: the scan's detected APs and their relative
-        inputs.
+        inputs; ``neighbours`` overrides the model's k.
         """
+        return self.weighted(self.distances(columns, values, c),
+                             neighbours or self.neighbours, c)
+
+    def distances(self, columns, values, c):
+        """Return the distance of one scan to each reference of class c."""
         first, last = self.class_start[c], self.class_start[c + 1]
         if first == last:
-            return np.full(2, np.nan), float('nan')
+            return np.empty(0)
         starts = self.column_start[c, columns]
         ends = self.column_start[c, np.asarray(columns) + 1]
         lengths = ends - starts
         entries = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) \
             + np.arange(lengths.sum())
-        dots = np.zeros(last - first)
-        np.add.at(dots, self.entry_ref[entries] - first,
-                  self.entry_value[entries] * np.repeat(values, lengths))
-        distance = np.sqrt(np.maximum(
+        dots = np.bincount(self.entry_ref[entries] - first,
+                           self.entry_value[entries] *
+                           np.repeat(values, lengths), last - first)
+        return np.sqrt(np.maximum(
             self.norms[first:last] + float(np.dot(values, values))
             - 2 * dots, 0.0))
-        k = min(neighbours or self.neighbours, last - first)
+
+    def weighted(self, distance, k, c):
+        """
+        Return (xy, sigma) of the ``k`` nearest of class ``c``'s references.
+
+        ``distance`` is from :meth:`distances`; weights are 1 / distance.
+        """
+        if not len(distance):
+            return np.full(2, np.nan), float('nan')
+        k = min(k, len(distance))
         nearest = np.argpartition(distance, k - 1)[:k]
         weight = 1.0 / np.maximum(distance[nearest], 1e-6)
-        xy = weight @ self.xy[first + nearest] / weight.sum()
+        xy = weight @ self.xy[self.class_start[c] + nearest] / weight.sum()
         return self.origin + xy, float(self.sigma[c])
 
 

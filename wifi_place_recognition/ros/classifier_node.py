@@ -347,9 +347,8 @@ class ClassifierNode(Node):
             _kv('model_created', provenance.get('created', '')),
             _kv('model_training_data_sha256',
                 provenance.get('training_data', {}).get('sha256', '')),
-            _kv('model_held_out_building_floor_accuracy',
-                selection.get('metrics', {}).get(
-                    'building_floor_accuracy', '')),
+            _kv('model_cross_validated_building_floor_accuracy',
+                selection.get('accuracy_mean', '')),
         ]
         status = DiagnosticStatus(
             level=DiagnosticStatus.OK, name=f'{self.get_name()}: health',

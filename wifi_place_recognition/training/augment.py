@@ -22,8 +22,13 @@ class ScanAugmenter:
             else -110.0
         self.rng = np.random.default_rng(seed)
 
-    def __call__(self):
-        """Return a freshly augmented copy of the matrix."""
+    def readings(self):
+        """
+        Return (rows, columns, dBm) of a freshly augmented set of readings.
+
+        Rows are in ascending order; readings pushed below the floor or
+        dropped are left out.
+        """
         c, rng, n = self.config, self.rng, self.shape[0]
         gain = rng.uniform(-c.augment_gain, c.augment_gain, n)
         offset = rng.uniform(-c.augment_offset, c.augment_offset, n)
@@ -34,6 +39,5 @@ class ScanAugmenter:
                 len(values), dtype=np.float32)
         kept = (rng.random(len(values), dtype=np.float32) >=
                 c.augment_dropout) & (values >= self.floor)
-        out = np.full(self.shape, np.nan, np.float32)
-        out[self.rows[kept], self.cols[kept]] = np.minimum(values[kept], 0.0)
-        return out
+        return (self.rows[kept], self.cols[kept],
+                np.minimum(values[kept], np.float32(0.0)))

@@ -32,8 +32,8 @@ class TrainConfig:
     augment_dropout: float = 0.1  # probability to drop a detected AP
     sae_epochs: int = 10
     epochs: int = 20              # the most; cross-validation picks fewer
-    batch_size: int = 256
-    learning_rate: float = 2e-3
+    batch_size: int = 512
+    learning_rate: float = 3e-3
     neighbours: int = 0           # k of the position k-NN; 0: by the folds
     folds: int = 4                # cross-validation folds; 0: no selection
     grouping: str = 'auto'        # what a fold holds out (see selection)

@@ -24,7 +24,7 @@ from ..core.model import PlaceModel
 from ..core.preprocessing import RssiScaler
 from ..data.fingerprints import check_trainable
 from .augment import ScanAugmenter
-from .network import PlaceNet
+from .network import PlaceNet, SparseBatch
 from .selection import grouped_folds
 
 
@@ -54,24 +54,48 @@ def _torch_state(threads, seed):
 
 
 class _Inputs:
-    """Network inputs of the training scans, augmented anew each epoch."""
+    """
+    Network inputs of the training scans, augmented anew each epoch.
+
+    Kept sparse (the detected readings, relative to a scan that detects
+    nothing): an epoch's augmentation and scaling touch a few dozen
+    readings per scan, and batches are :class:`SparseBatch`.
+    """
 
     def __init__(self, rssi, scaler, config, seed):
         self.scaler = scaler
+        self.n = len(rssi)
+        self.blank = scaler.transform(np.full((1, rssi.shape[1]), np.nan,
+                                              np.float32))[0]
         self.augmenter = ScanAugmenter(rssi, config, seed) \
             if config.augmenting else None
-        self.fixed = None if self.augmenter else \
-            torch.from_numpy(scaler.transform(rssi))
+        if self.augmenter is None:
+            rows, cols = np.nonzero(~np.isnan(rssi))
+            self.fixed = self._entries(rows, cols, rssi[rows, cols])
         self.batch_size = config.batch_size
         self.generator = torch.Generator().manual_seed(seed)
 
+    def _entries(self, rows, cols, dbm):
+        """Return (row starts, columns, relative inputs) of row-sorted readings."""
+        starts = np.searchsorted(rows, np.arange(self.n + 1))
+        inputs = self.scaler.transform(dbm, cols) - self.blank[cols]
+        return starts, cols.astype(np.int64), inputs.astype(np.float32)
+
     def epoch(self):
-        """Yield (indices, inputs) mini-batches of one shuffled epoch."""
-        x = self.fixed if self.augmenter is None else \
-            torch.from_numpy(self.scaler.transform(self.augmenter()))
-        order = torch.randperm(len(x), generator=self.generator)
+        """Yield (indices, SparseBatch) mini-batches of one shuffled epoch."""
+        starts, cols, inputs = self.fixed if self.augmenter is None else \
+            self._entries(*self.augmenter.readings())
+        blank = torch.from_numpy(self.blank)
+        order = torch.randperm(self.n, generator=self.generator)
         for idx in torch.split(order, self.batch_size):
-            yield idx, x[idx]
+            first = starts[idx.numpy()]
+            lengths = starts[idx.numpy() + 1] - first
+            offsets = np.cumsum(lengths) - lengths
+            entries = np.repeat(first - offsets, lengths) + \
+                np.arange(lengths.sum())
+            yield idx, SparseBatch(torch.from_numpy(cols[entries]),
+                                   torch.from_numpy(offsets),
+                                   torch.from_numpy(inputs[entries]), blank)
 
 
 def _predicted(net, x):
@@ -101,10 +125,10 @@ def fit_network(rssi, y, n_classes, scaler, config, epochs, seed,
             total = 0.0
             for _, x in inputs.epoch():
                 optimiser.zero_grad()
-                loss = nn.functional.mse_loss(sae(x), x)
+                loss = nn.functional.mse_loss(sae(x), x.dense())
                 loss.backward()
                 optimiser.step()
-                total += loss.item() * len(x)
+                total += loss.item() * len(x.offsets)
             log(f'  sae epoch {epoch:3d}/{config.sae_epochs}  '
                 f'reconstruction mse {total / len(rssi):.4f}')
         optimiser = torch.optim.Adam(net.parameters(),
@@ -202,9 +226,11 @@ def _cross_validate_position(fp, y, n_classes, config, runs, log):
         locator = _locator(fp.subset(~held), y[~held], n_classes, scaler)
         rows = list(_sparse_inputs(fp.rssi[held], scaler))
         truth = fp.position[held]
+        distances = [locator.distances(columns, inputs, c)
+                     for (columns, inputs), c in zip(rows, classes)]
         for k in candidates:
-            xy = np.array([locator.locate(columns, inputs, c, k)[0]
-                           for (columns, inputs), c in zip(rows, classes)])
+            xy = np.array([locator.weighted(d, k, c)[0]
+                           for d, c in zip(distances, classes)])
             errors[k].append(np.linalg.norm(xy - truth, axis=1))
         predicted.append(classes)
     mean = {k: float(np.nanmean(np.concatenate(e)))
