@@ -16,6 +16,10 @@ JSON.
 
 ``--suite search`` runs only the cross-validation of each variant (no test
 file at all): the selection log of benchmarks/README.md comes from it.
+``--suite members`` cross-validates ensembles: in every fold, ``--members``
+networks of the default recipe (seeds apart), and the held-out accuracy of
+the mean of the first m of them at every epoch: the curve that chooses the
+ensemble size (no test file either).
 
     python benchmarks/accuracy.py --dataset ujiindoorloc --suite default
     python benchmarks/accuracy.py --dataset wifine --suite default
@@ -51,7 +55,7 @@ from wifi_place_recognition.training.config import (  # noqa: E402
 from wifi_place_recognition.training.selection import (  # noqa: E402
     grouped_folds)
 from wifi_place_recognition.training.trainer import (  # noqa: E402
-    cross_validate)
+    best_epoch, config_scaler, cross_validate, fit_network)
 
 WIFINE_OPTIONS = dict(floor_column='floorID', building_column=None,
                       not_detected_marker=-100.0,
@@ -252,6 +256,47 @@ def search(args, train_fp):
     return {'runs': runs}
 
 
+def members(args, train_fp):
+    """Cross-validate ensembles of 1..``--members`` networks; no test file."""
+    import torch
+    train_fp = train_fp.subset(~train_fp.empty_rows)
+    classes, y = class_index(train_fp.building, train_fp.floor)
+    runs = []
+    for seed in args.seeds:
+        config = TrainConfig(seed=seed)
+        folds = grouped_folds(train_fp, y, config.folds, config.grouping,
+                              seed)
+        start = time.perf_counter()
+        curves = []     # [fold][m] -> accuracy per epoch of m members
+        for k, held in enumerate(folds.held_out):
+            scaler = config_scaler(config).fit(train_fp.rssi[~held])
+            x = torch.from_numpy(scaler.transform(train_fp.rssi[held]))
+            proba = [fit_network(
+                train_fp.rssi[~held], torch.from_numpy(y[~held]),
+                len(classes), scaler, config, config.epochs,
+                seed + 1000 * (k + 1) + m, (x, torch.from_numpy(y[held])),
+                log=lambda line: None)[1] for m in range(args.members)]
+            proba = np.array(proba)             # (m, epochs, n, k)
+            mean = np.cumsum(proba, axis=0)     # first m members
+            curves.append((mean.argmax(axis=-1) == y[held]).mean(axis=-1))
+        curves = np.array(curves)               # (folds, m, epochs)
+        single = curves[:, 0].mean(axis=0)
+        epoch = best_epoch(single)
+        at = curves[:, :, epoch]
+        runs.append({'seed': seed, 'epochs': epoch + 1,
+                     'curves': np.round(curves, 5).tolist(),
+                     'members_mean': at.mean(axis=0).tolist(),
+                     'members_min': at.min(axis=0).tolist(),
+                     'members_max': at.max(axis=0).tolist(),
+                     'seconds': time.perf_counter() - start})
+        print(f'seed {seed}, epoch {epoch + 1} (chosen on one member): '
+              'cross-validated building+floor by members: '
+              + ', '.join(f'{m + 1}: {v:.4f}'
+                          for m, v in enumerate(at.mean(axis=0))),
+              file=sys.stderr, flush=True)
+    return {'runs': runs}
+
+
 def main():
     """Run a suite; print the table; write JSON."""
     p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -260,12 +305,18 @@ def main():
                    help='folder holding ujiindoorloc/ and wifine/')
     p.add_argument('--dataset', choices=sorted(DATASETS),
                    default='ujiindoorloc')
-    p.add_argument('--suite', choices=sorted(SUITES) + ['search'],
+    p.add_argument('--suite', choices=sorted(SUITES) + ['search', 'members'],
                    default='default')
+    p.add_argument('--members', type=int, default=5,
+                   help='members: the largest ensemble cross-validated')
     p.add_argument('--variants', help='search: JSON {name: overrides}')
     p.add_argument('--seeds', type=lambda s: [int(v) for v in s.split(',')],
                    default=[0, 1, 2])
     p.add_argument('--no-baselines', action='store_true')
+    p.add_argument('--recipes', type=lambda s: s.split(','), default=None,
+                   help='run only the recipes whose names start with these '
+                        'comma-separated words (default suite: default, '
+                        'paper)')
     p.add_argument('--out', type=Path, default=None)
     args = p.parse_args()
     data = DATASETS[args.dataset]
@@ -277,8 +328,9 @@ def main():
     train_fp = read_fingerprints(paths['train'], options=options)
     protocol = {'dataset': args.dataset, 'train': paths['train'],
                 'train_sha256': train_fp.sha256, 'seeds': args.seeds}
-    if args.suite == 'search':
-        result = search(args, train_fp)
+    if args.suite in ('search', 'members'):
+        result = (search if args.suite == 'search' else members)(
+            args, train_fp)
         _write(out, dict(protocol, test=None, **result))
         return
     test_fp = read_fingerprints(paths['test'], role='test', options=options)
@@ -287,6 +339,8 @@ def main():
     with tempfile.TemporaryDirectory() as folder:
         for seed in args.seeds:
             for name, flags in SUITES[args.suite].items():
+                if args.recipes and name.split(' ')[0] not in args.recipes:
+                    continue
                 r = train_and_test(flags, seed, paths, data, folder)
                 runs.setdefault(name, []).append(r)
                 print(f'{name} seed {seed}: test building+floor '

@@ -97,8 +97,7 @@ def cross_fit_probabilities(model, fp, folds, options, log):
     phones = np.unique(fp.meta['PHONEID'])
     order = np.random.default_rng(0).permutation(len(phones))
     proba = np.full((len(fp), len(model.classes)), np.nan)
-    config = TrainConfig(**dict(dict(folds=0, ensemble=1,
-                                     position_weight=0.0), **options))
+    config = TrainConfig(**dict(dict(folds=0, ensemble=1), **options))
     for k in range(folds):
         held = np.isin(fp.meta['PHONEID'], phones[order[k::folds]])
         log(f'cross-fit {k + 1}/{folds}: phones '

@@ -25,12 +25,10 @@ ACTIVATIONS = {'relu': _relu, 'elu': _elu, 'linear': _identity,
 
 
 def mean_softmax(member_logits):
-    """Return the mean over members of softmax(logits) along the last axis."""
-    total = 0.0
-    for x in member_logits:
-        x = np.exp(x - x.max(axis=-1, keepdims=True))
-        total = total + x / x.sum(axis=-1, keepdims=True)
-    return total / len(member_logits)
+    """Return the mean over members (first axis) of softmax(logits)."""
+    x = np.asarray(member_logits)
+    x = np.exp(x - x.max(axis=-1, keepdims=True))
+    return (x / x.sum(axis=-1, keepdims=True)).mean(axis=0)
 
 
 @dataclass

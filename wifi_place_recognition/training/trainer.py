@@ -76,7 +76,7 @@ class _Inputs:
         self.generator = torch.Generator().manual_seed(seed)
 
     def _entries(self, rows, cols, dbm):
-        """Return (row starts, columns, relative inputs) of row-sorted readings."""
+        """Return (row starts, columns, relative inputs) of sorted readings."""
         starts = np.searchsorted(rows, np.arange(self.n + 1))
         inputs = self.scaler.transform(dbm, cols) - self.blank[cols]
         return starts, cols.astype(np.int64), inputs.astype(np.float32)
@@ -98,13 +98,13 @@ class _Inputs:
                                    torch.from_numpy(inputs[entries]), blank)
 
 
-def _predicted(net, x):
-    """Return the classes ``net`` predicts for inputs ``x``."""
+def _probabilities(net, x):
+    """Return the class probabilities ``net`` gives inputs ``x``."""
     net.eval()
     with torch.no_grad():
-        predicted = net(x).argmax(dim=1).numpy()
+        proba = torch.softmax(net(x), dim=1).numpy()
     net.train()
-    return predicted
+    return proba
 
 
 def fit_network(rssi, y, n_classes, scaler, config, epochs, seed,
@@ -113,7 +113,7 @@ def fit_network(rssi, y, n_classes, scaler, config, epochs, seed,
     Train one network on ``rssi`` (NaN = not detected) and class indices.
 
     With ``held_out`` = (inputs, class indices), also return the held-out
-    predicted classes after every epoch. Returns (net, [classes]).
+    class probabilities after every epoch. Returns (net, [(n, k) arrays]).
     """
     with _torch_state(config.threads, seed):
         inputs = _Inputs(rssi, scaler, config, seed)
@@ -144,15 +144,16 @@ def fit_network(rssi, y, n_classes, scaler, config, epochs, seed,
                 total += loss.item() * len(idx)
             line = f'  epoch {epoch:3d}/{epochs}  loss {total / len(rssi):.4f}'
             if held_out is not None:
-                predictions.append(_predicted(net, held_out[0]))
-                right = (predictions[-1] == held_out[1].numpy()).mean()
+                predictions.append(_probabilities(net, held_out[0]))
+                right = (predictions[-1].argmax(axis=1) ==
+                         held_out[1].numpy()).mean()
                 line += f'  held-out building+floor {right:.4f}'
             log(line)
         net.eval()
     return net, predictions
 
 
-def _best_epoch(mean, window=3):
+def best_epoch(mean, window=3):
     """
     Return the index of the best epoch of a mean held-out curve.
 
@@ -186,7 +187,7 @@ def cross_validate(fp, y, n_classes, config, log=print):
         + (f'; {folds.note}' if folds.note else '') + ')')
     runs, fold_info = [], []
     for k, held in enumerate(folds.held_out):
-        scaler = _scaler(config).fit(fp.rssi[~held])
+        scaler = config_scaler(config).fit(fp.rssi[~held])
         held_out = (torch.from_numpy(scaler.transform(fp.rssi[held])),
                     y[held])
         log(f'fold {k + 1}/{len(folds.held_out)}: {int((~held).sum())} '
@@ -198,10 +199,11 @@ def cross_validate(fp, y, n_classes, config, log=print):
         fold_info.append({'held_out_scans': int(held.sum()),
                           'classes': sorted(set(y[held].tolist()))})
     truth = y.numpy()
-    curves = np.array([[(c == truth[held]).mean() for c in predictions]
+    curves = np.array([[(p.argmax(axis=1) == truth[held]).mean()
+                        for p in predictions]
                        for held, _, predictions in runs])
     mean = curves.mean(axis=0)
-    best = _best_epoch(mean)
+    best = best_epoch(mean)
     summary = {'grouping': folds.grouping, 'note': folds.note,
                'groups': folds.groups, 'never_held_out': folds.never_held_out,
                'folds': fold_info, 'curves': np.round(curves, 5).tolist(),
@@ -212,7 +214,7 @@ def cross_validate(fp, y, n_classes, config, log=print):
     if fp.position is not None:
         summary.update(_cross_validate_position(
             fp, truth, n_classes, config,
-            [(held, scaler, predictions[best])
+            [(held, scaler, predictions[best].argmax(axis=1))
              for held, scaler, predictions in runs], log))
     return summary
 
@@ -266,7 +268,8 @@ def _locator(fp, y, n_classes, scaler, neighbours=5, sigma=None):
                          sigma, fp.position_columns)
 
 
-def _scaler(config):
+def config_scaler(config):
+    """Return the (unfitted) scaler of a training configuration."""
     return RssiScaler(config.not_detected, config.scaling,
                       config.representation)
 
@@ -297,7 +300,7 @@ def train(fp, config, log=print):
         log(f'cross-validated building+floor {s["accuracy_mean"]:.4f} '
             f'({s["accuracy_min"]:.4f}-{s["accuracy_max"]:.4f} over folds) '
             f'at {report.epochs} epochs')
-    scaler = _scaler(config).fit(fp.rssi)
+    scaler = config_scaler(config).fit(fp.rssi)
     nets = []
     for k in range(config.ensemble):
         log(f'member {k + 1}/{config.ensemble}: all {len(fp)} scans, '
