@@ -97,8 +97,8 @@ def _maps(plt, folder, fp, xy, error):
         ax.set_xlabel(f'{fp.position_columns[0]} (m)')
         ax.set_ylabel(f'{fp.position_columns[1]} (m)')
         ax.set_title(f'building {b}, floor {f}: {here.sum()} scans, mean '
-                     f'error {error[here].mean():.2f} m (line: truth to '
-                     f'prediction)')
+                     f'error {error[here].mean():.2f} m\n(dot: true '
+                     f'position, line: to the prediction)', fontsize=10)
         written.append(_save(plt, fig, folder / f'map_B{b}F{f}.png'))
     return written
 
