@@ -23,11 +23,20 @@ def tracked_model(synthetic, tmp_path_factory):
     """Return (model path, {(building, floor): [scan rows]}) with tracking."""
     csv_path, model_path = synthetic
     model = load_model(model_path)
-    model.tracking = TrackingParams(floor_rate=2e-3, building_rate=1e-5,
-                                    min_interval=5.0, temperature=2.0)
+    fp = read_fingerprints(csv_path)
+    # The evidence of one scan for floor 1 against floor 0 (the model's
+    # typical odds) tempered to 30: one scan cannot overturn the prior odds
+    # of ~99 after 5 s, two scans can, however confident the model is.
+    c = {tuple(k): i for i, k in enumerate(model.classes.tolist())}
+    on_floor_1 = model.predict_proba(fp.rssi[(fp.building == 0) &
+                                             (fp.floor == 1)])
+    odds = np.median(on_floor_1[:, c[0, 1]] /
+                     np.maximum(on_floor_1[:, c[0, 0]], 1e-12))
+    model.tracking = TrackingParams(
+        floor_rate=2e-3, building_rate=1e-5, min_interval=5.0,
+        temperature=max(1.0, float(np.log(odds) / np.log(30))))
     path = tmp_path_factory.mktemp('tracking') / 'tracked.npz'
     save_model(model, path)
-    fp = read_fingerprints(csv_path)
     rows = {}
     for i, (b, f) in enumerate(zip(fp.building, fp.floor)):
         rows.setdefault((int(b), int(f)), []).append(i)

@@ -26,9 +26,9 @@ the tracked class changes.
 
 :func:`fit_rates`, :func:`fit_evidence` and :func:`fit_motion` choose the
 parameters on training walks; :class:`TrackingParams` is what a model file
-stores. The defaults are those chosen on WiFine's ``val/`` walks (one
-building: its building rate is a choice, 1/200 of the floor rate; positions
-from a k-NN stand-in for the position model).
+stores. The defaults are those chosen on WiFine's ``val/`` walks with the
+default recipe's WiFine model (``benchmarks/tracking.py fit``; one
+building: its building rate is a choice, 1/200 of the floor rate).
 """
 
 from dataclasses import asdict, dataclass, fields, replace
@@ -55,9 +55,9 @@ class TrackingParams:
     floor_rate: float = 2e-3         # floor changes per second
     building_rate: float = 1e-5      # building changes per second
     min_interval: float = 200.0      # s: a scan counts for at least this
-    temperature: float = 3.0         # evidence = probabilities ** (1 / T)
-    acceleration_noise: float = 0.1  # m^2/s^3 per axis
-    speed_sd: float = 0.5            # m/s per axis, when a track starts
+    temperature: float = 1.0         # evidence = probabilities ** (1 / T)
+    acceleration_noise: float = 0.01  # m^2/s^3 per axis
+    speed_sd: float = 0.19           # m/s per axis, when a track starts
     fit: dict = None                 # how they were chosen (free-form)
 
     def __post_init__(self):
