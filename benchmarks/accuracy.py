@@ -275,7 +275,8 @@ def members(args, train_fp):
                 train_fp.rssi[~held], torch.from_numpy(y[~held]),
                 len(classes), scaler, config, config.epochs,
                 seed + 1000 * (k + 1) + m, (x, torch.from_numpy(y[held])),
-                log=lambda line: None)[1] for m in range(args.members)]
+                log=lambda line: None, proba=True)[1]
+                for m in range(args.members)]
             proba = np.array(proba)             # (m, epochs, n, k)
             mean = np.cumsum(proba, axis=0)     # first m members
             curves.append((mean.argmax(axis=-1) == y[held]).mean(axis=-1))

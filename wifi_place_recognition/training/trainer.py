@@ -98,22 +98,24 @@ class _Inputs:
                                    torch.from_numpy(inputs[entries]), blank)
 
 
-def _probabilities(net, x):
-    """Return the class probabilities ``net`` gives inputs ``x``."""
+def _predicted(net, x, proba):
+    """Return the classes ``net`` predicts for ``x`` (or probabilities)."""
     net.eval()
     with torch.no_grad():
-        proba = torch.softmax(net(x), dim=1).numpy()
+        logits = net(x)
+        out = torch.softmax(logits, dim=1) if proba else logits.argmax(dim=1)
     net.train()
-    return proba
+    return out.numpy()
 
 
 def fit_network(rssi, y, n_classes, scaler, config, epochs, seed,
-                held_out=None, log=print):
+                held_out=None, log=print, proba=False):
     """
     Train one network on ``rssi`` (NaN = not detected) and class indices.
 
     With ``held_out`` = (inputs, class indices), also return the held-out
-    class probabilities after every epoch. Returns (net, [(n, k) arrays]).
+    predicted classes after every epoch (with ``proba``, their class
+    probabilities). Returns (net, [per-epoch arrays]).
     """
     with _torch_state(config.threads, seed):
         inputs = _Inputs(rssi, scaler, config, seed)
@@ -144,9 +146,10 @@ def fit_network(rssi, y, n_classes, scaler, config, epochs, seed,
                 total += loss.item() * len(idx)
             line = f'  epoch {epoch:3d}/{epochs}  loss {total / len(rssi):.4f}'
             if held_out is not None:
-                predictions.append(_probabilities(net, held_out[0]))
-                right = (predictions[-1].argmax(axis=1) ==
-                         held_out[1].numpy()).mean()
+                predictions.append(_predicted(net, held_out[0], proba))
+                classes = predictions[-1].argmax(axis=1) if proba else \
+                    predictions[-1]
+                right = (classes == held_out[1].numpy()).mean()
                 line += f'  held-out building+floor {right:.4f}'
             log(line)
         net.eval()
@@ -199,8 +202,7 @@ def cross_validate(fp, y, n_classes, config, log=print):
         fold_info.append({'held_out_scans': int(held.sum()),
                           'classes': sorted(set(y[held].tolist()))})
     truth = y.numpy()
-    curves = np.array([[(p.argmax(axis=1) == truth[held]).mean()
-                        for p in predictions]
+    curves = np.array([[(c == truth[held]).mean() for c in predictions]
                        for held, _, predictions in runs])
     mean = curves.mean(axis=0)
     best = best_epoch(mean)
@@ -214,7 +216,7 @@ def cross_validate(fp, y, n_classes, config, log=print):
     if fp.position is not None:
         summary.update(_cross_validate_position(
             fp, truth, n_classes, config,
-            [(held, scaler, predictions[best].argmax(axis=1))
+            [(held, scaler, predictions[best])
              for held, scaler, predictions in runs], log))
     return summary
 
