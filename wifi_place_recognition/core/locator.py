@@ -92,8 +92,7 @@ class Locator:
         starts = self.column_start[c, columns]
         ends = self.column_start[c, np.asarray(columns) + 1]
         lengths = ends - starts
-        entries = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) \
-            + np.arange(lengths.sum())
+        entries = ranges(starts, lengths)
         dots = np.bincount(self.entry_ref[entries] - first,
                            self.entry_value[entries] *
                            np.repeat(values, lengths), last - first)
@@ -114,6 +113,12 @@ class Locator:
         weight = 1.0 / np.maximum(distance[nearest], 1e-6)
         xy = weight @ self.xy[self.class_start[c] + nearest] / weight.sum()
         return self.origin + xy, float(self.sigma[c])
+
+
+def ranges(starts, lengths):
+    """Return the indices of the ranges [start, start + length), joined."""
+    offsets = np.cumsum(lengths) - lengths
+    return np.repeat(starts - offsets, lengths) + np.arange(lengths.sum())
 
 
 def sparse_rows(inputs):

@@ -66,8 +66,7 @@ class PlaceModel:
 
     def __post_init__(self):
         """Keep the inputs of a scan that detects nothing (the reference)."""
-        empty = np.full((1, len(self.ap_ids)), np.nan, np.float32)
-        self.blank = self.scaler.transform(empty)[0]
+        self.blank = self.scaler.blank()
 
     def predict_proba(self, rssi):
         """Return class probabilities, shape (n, k), for (n, n_aps) RSSI."""

@@ -82,6 +82,11 @@ class RssiScaler:
             return (self.fill(rssi) - self.mean_) / self.std_
         return (self.fill(rssi) - self.mean_[columns]) / self.std_[columns]
 
+    def blank(self):
+        """Return the inputs (n_aps,) of a scan that detects nothing."""
+        return self.transform(np.full((1, len(self.mean_)), np.nan,
+                                      np.float32))[0]
+
     def params(self):
         """Return the JSON-able parameters (arrays go separately)."""
         return {'not_detected': self.not_detected, 'scaling': self.scaling,

@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from ..core.metrics import class_index
-from ..core.locator import calibrated_sigma, Locator
+from ..core.locator import calibrated_sigma, Locator, ranges
 from ..core.model import PlaceModel
 from ..core.preprocessing import RssiScaler
 from ..data.fingerprints import check_trainable
@@ -65,8 +65,7 @@ class _Inputs:
     def __init__(self, rssi, scaler, config, seed):
         self.scaler = scaler
         self.n = len(rssi)
-        self.blank = scaler.transform(np.full((1, rssi.shape[1]), np.nan,
-                                              np.float32))[0]
+        self.blank = scaler.blank()
         self.augmenter = ScanAugmenter(rssi, config, seed) \
             if config.augmenting else None
         if self.augmenter is None:
@@ -90,9 +89,8 @@ class _Inputs:
         for idx in torch.split(order, self.batch_size):
             first = starts[idx.numpy()]
             lengths = starts[idx.numpy() + 1] - first
+            entries = ranges(first, lengths)
             offsets = np.cumsum(lengths) - lengths
-            entries = np.repeat(first - offsets, lengths) + \
-                np.arange(lengths.sum())
             yield idx, SparseBatch(torch.from_numpy(cols[entries]),
                                    torch.from_numpy(offsets),
                                    torch.from_numpy(inputs[entries]), blank)
@@ -253,8 +251,7 @@ def _cross_validate_position(fp, y, n_classes, config, runs, log):
 
 def _sparse_inputs(rssi, scaler):
     """Yield (columns, inputs relative to an empty scan) of each scan."""
-    blank = scaler.transform(np.full((1, rssi.shape[1]), np.nan,
-                                     np.float32))[0]
+    blank = scaler.blank()
     for row in rssi:
         columns = np.flatnonzero(~np.isnan(row))
         yield columns, scaler.transform(row[columns], columns) - \
