@@ -1,5 +1,7 @@
 """The position k-NN: exact neighbours, and its arrays in the model file."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from wifi_place_recognition.core.artifact import (load_model,
@@ -15,17 +17,32 @@ def _references(rng, n=300, n_aps=40, n_classes=3):
     return inputs.astype(np.float32), classes, xy
 
 
+def _stored(locator, c):
+    """Return class ``c``'s references as the locator holds them (dense)."""
+    rows = slice(locator.ap_start[c], locator.ap_start[c + 1])
+    out = np.zeros((locator.class_start[c + 1] - locator.class_start[c],
+                    locator.n_aps))
+    out[:, locator.ap_column[rows]] = \
+        (locator.blocks[c] * locator.scale[rows, None]).T
+    return out
+
+
 def test_locate_is_distance_weighted_knn_within_the_class():
     rng = np.random.default_rng(0)
     inputs, classes, xy = _references(rng)
     locator = Locator.build(inputs, classes, xy, 3, neighbours=4,
                             sigma=[1.0, 2.0, 3.0])
+    for c in range(3):  # int8 references: within half a step of each row
+        stored = _stored(locator, c)
+        step = np.abs(inputs[classes == c]).max(axis=0) / 127
+        assert (np.abs(stored - inputs[classes == c]) <=
+                step / 2 * 1.001 + 1e-7).all()
     for _ in range(20):
         query = np.where(rng.random(40) < 0.3, rng.normal(1, 0.5, 40), 0.0)
         columns = np.flatnonzero(query)
         c = int(rng.integers(0, 3))
         mine = np.flatnonzero(classes == c)
-        distance = np.linalg.norm(inputs[mine] - query, axis=1)
+        distance = np.linalg.norm(_stored(locator, c) - query, axis=1)
         nearest = np.argsort(distance)[:4]
         weight = 1 / distance[nearest]
         expected = weight @ xy[mine[nearest]] / weight.sum()
@@ -45,10 +62,19 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
     save_model(model, tmp_path / 'm.npz')
     loaded = load_model(tmp_path / 'm.npz').position
     np.testing.assert_array_equal(loaded.origin, model.position.origin)
-    np.testing.assert_array_equal(loaded.entry_ref, model.position.entry_ref)
-    # A reference index pointing into another class is refused on loading.
-    model.position.entry_ref = model.position.entry_ref.copy()
-    model.position.entry_ref[0] = len(xy) - 1
-    save_model(model, tmp_path / 'bad.npz')
-    with pytest.raises(ModelFileError, match='outside its class'):
-        load_model(tmp_path / 'bad.npz')
+    for name in ('class_start', 'ap_start', 'ap_column', 'scale', 'codes',
+                 'norms', 'xy', 'sigma'):
+        np.testing.assert_array_equal(getattr(loaded, name),
+                                      getattr(model.position, name))
+    # Tampered indices and codes are refused on loading.
+    for name, index, value, message in (
+            ('ap_column', 1, 0, 'not ascending'),
+            ('ap_column', -1, len(model.ap_ids), 'not ascending'),
+            ('codes', 0, 300, 'codes must be integers'),
+            ('class_start', 1, 10**6, 'inconsistent index')):
+        bad = replace(model.position)
+        setattr(bad, name, getattr(bad, name).astype(np.float64))
+        getattr(bad, name)[index] = value
+        save_model(replace(model, position=bad), tmp_path / 'bad.npz')
+        with pytest.raises(ModelFileError, match=message):
+            load_model(tmp_path / 'bad.npz')

@@ -17,7 +17,7 @@ from wifi_place_recognition.core.model import mean_softmax, ScanForward
 from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.selection import grouped_folds
-from wifi_place_recognition.training.trainer import train
+from wifi_place_recognition.training.trainer import best_epoch, train
 
 SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
              epochs=15, batch_size=32, ensemble=1)
@@ -162,6 +162,37 @@ def test_train_then_evaluate_on_the_command_line(tmp_path):
     rows = list(csv.DictReader(preds.open()))
     assert len(rows) == scores['samples'] == 240
     assert rows[0].keys() >= {'pred_building', 'pred_floor', 'confidence'}
+
+
+def test_validation_data_chooses_epochs_and_sigma(tmp_path):
+    data = surveyed_csv(tmp_path / 'a.csv')
+    validation = surveyed_csv(tmp_path / 'v.csv', scans_seed=2,
+                              scans_per_floor=60)
+    model = tmp_path / 'm.npz'
+    result = run(python_module('cli.train_model', '--data', data,
+                               '--validation', validation, '-o', model,
+                               *FAST))
+    assert result.returncode == 0, result.stderr
+    assert f'validation data {validation}: building+floor' in result.stdout
+    loaded = load_model(model)
+    selection = loaded.provenance['selection']
+    assert selection['grouping'] == 'validation'
+    assert [f['held_out_scans'] for f in selection['folds']] == [120]
+    assert loaded.provenance['validation_data']['scans'] == 120
+    assert loaded.provenance['epochs'] == \
+        best_epoch(selection['mean_curve']) + 1
+    assert loaded.position is not None      # sigma from validation scans
+    assert selection['position_mean_error_m'] < 5.0
+    # a class the training data lacks: exit 2 naming it, nothing written
+    other = synthetic_csv(tmp_path / 'other.csv')
+    result = run(python_module('cli.train_model', '--data', data,
+                               '--validation', other, '-o',
+                               tmp_path / 'no.npz', *FAST))
+    assert result.returncode == 2
+    assert 'building 1 floor 0' in result.stderr and \
+        'not in the training data' in result.stderr
+    assert 'Traceback' not in result.stderr
+    assert not (tmp_path / 'no.npz').exists()
 
 
 @pytest.mark.parametrize('content, message', [

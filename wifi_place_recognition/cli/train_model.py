@@ -26,6 +26,11 @@ def build_parser():
                         'each), or the UCI zip')
     p.add_argument('-o', '--output', required=True,
                    help='model file to write (atomically)')
+    p.add_argument('--validation', nargs='+', metavar='PATH',
+                   help='choose the epochs (and the position\'s k and '
+                        'sigma) on these CSV(s) or folder instead of by '
+                        'cross-validation: other days, devices or walks '
+                        'of the same building(s); not trained on')
     p.add_argument('--test', nargs='+', metavar='PATH',
                    help='also evaluate on these CSV(s) or folder at the end')
     p.add_argument('--quiet', action='store_true',
@@ -60,6 +65,10 @@ def main(argv=None):
                             for f in fields(TrainConfig)})
     train_fp = read_data(args.data, args, 'training data',
                          small_classes=args.small_classes)
+    validation_fp = None
+    if args.validation:
+        validation_fp = read_data(args.validation, args, 'validation data',
+                                  role='test')
     test_fp = None
     if args.test or (args.download and not args.data):
         test_fp = read_data(args.test, args, 'test data', role='test')
@@ -69,14 +78,17 @@ def main(argv=None):
             print(line, file=sys.stderr, flush=True)
 
     print(train_fp.summary(), file=sys.stderr, flush=True)
-    model, _, report = _trainer()(train_fp, config, log)
+    model, _, report = _trainer()(train_fp, config, log, validation_fp)
     save_model(model, args.output)
     print(f'wrote {args.output}: {len(model.ap_ids)} APs, '
           f'{len(model.classes)} classes, {len(model.members)} network(s) '
           f'of {report.epochs} epochs, trained in {report.seconds:.1f} s '
           f'({report.dropped_empty} scans without any AP left out)')
-    if report.selection:
-        s = report.selection
+    s = report.selection
+    if s.get('grouping') == 'validation':
+        print(f'validation data {s["note"]}: building+floor '
+              f'{s["accuracy_mean"]:.4f} at {report.epochs} epochs')
+    elif s:
         print(f'cross-validated ({len(s["folds"])} folds of whole '
               f'{s["grouping"]} groups): building+floor '
               f'{s["accuracy_mean"]:.4f} ({s["accuracy_min"]:.4f}-'

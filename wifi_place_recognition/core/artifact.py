@@ -8,7 +8,7 @@ written atomically (temporary file, fsync, rename), so a crash mid-write
 leaves the previous file intact.
 """
 
-import hashlib
+import ctypes
 import json
 import zipfile
 from pathlib import Path
@@ -16,18 +16,30 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_write
-from .locator import Locator
+from .locator import LEVELS, Locator
 from .model import ACTIVATIONS, Layer, PlaceModel
 from .preprocessing import RssiScaler
 from .tracking import TrackingParams
 
+# SHA-256 from CPython's built-in module (_sha2 from 3.12, _sha256 before):
+# hashlib would load OpenSSL, about 4 MiB resident in a node that needs none.
+try:
+    from _sha2 import sha256
+except ImportError:
+    try:
+        from _sha256 import sha256
+    except ImportError:
+        from hashlib import sha256
+
 FORMAT = 'wifi_place_recognition/model'
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2     # 2: the locator's references as int8 blocks
 MAX_FILE_BYTES = 256 << 20
 MAX_UNPACKED_BYTES = 1 << 30
-#: The locator's arrays in the file (all float32; indices exact to 2**24).
-LOCATOR_ARRAYS = ('class_start', 'column_start', 'entry_ref', 'entry_value',
+#: The locator's arrays in the file (all float32: indices below 2**24 and
+#: int8 codes are exact).
+LOCATOR_ARRAYS = ('class_start', 'ap_start', 'ap_column', 'scale', 'codes',
                   'norms', 'xy', 'sigma')
+MAX_INDEX = 1 << 24
 
 
 class ModelFileError(ValueError):
@@ -35,7 +47,7 @@ class ModelFileError(ValueError):
 
 
 def _digest(header, arrays):
-    h = hashlib.sha256(json.dumps(header, sort_keys=True).encode())
+    h = sha256(json.dumps(header, sort_keys=True).encode())
     for name in sorted(arrays):
         a = np.ascontiguousarray(arrays[name])
         h.update(f'{name}|{a.dtype.str}|{a.shape}'.encode())
@@ -57,9 +69,10 @@ def save_model(model, path):
         header['tracking'] = model.tracking.to_dict()
     if model.position is not None:
         pos = model.position
-        if len(pos.entry_ref) >= 1 << 24:
-            raise ValueError('too many reference readings for the model file '
-                             f'({len(pos.entry_ref)}, at most 2**24)')
+        if max(len(pos.xy), len(pos.ap_column)) >= MAX_INDEX:
+            raise ValueError(f'too many reference scans or rows for the '
+                             f'model file ({len(pos.xy)}, '
+                             f'{len(pos.ap_column)}; at most 2**24)')
         for name in LOCATOR_ARRAYS:
             arrays[f'position.{name}'] = np.asarray(getattr(pos, name),
                                                     np.float32)
@@ -94,6 +107,22 @@ def load_model(path):
         raise ModelFileError(f'{path}: {exc}') from None
     except (KeyError, TypeError, ValueError) as exc:
         raise ModelFileError(f'{path}: malformed model file ({exc})') from None
+    finally:
+        _release_freed_memory()
+
+
+def _release_freed_memory():
+    """
+    Return freed heap memory to the system (glibc; elsewhere a no-op).
+
+    Unpacking the file frees buffers several times the model's size, which
+    the C heap would otherwise keep in the process's resident memory.
+    """
+    try:
+        trim = ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return
+    trim(0)
 
 
 def _read(path):
@@ -198,34 +227,41 @@ def _position(header, arrays, n_aps, n_classes):
                              'neighbours a positive integer and columns two '
                              'names')
     a = {name: arrays[f'position.{name}'] for name in LOCATOR_ARRAYS}
-    n_refs, n_entries = len(a['norms']), len(a['entry_ref'])
-    index = [a['class_start'], a['column_start'], a['entry_ref']]
-    shapes_ok = (a['class_start'].shape == (n_classes + 1,) and
-                 a['column_start'].shape == (n_classes, n_aps + 1) and
-                 a['entry_value'].shape == (n_entries,) and
+    if not all(np.isfinite(v).all() for v in a.values()) or \
+            not all((a[i] == np.round(a[i])).all() and (a[i] >= 0).all()
+                    for i in ('class_start', 'ap_start', 'ap_column')):
+        raise ModelFileError('position: non-finite values or indices that '
+                             'are not counts')
+    class_start, ap_start, ap_column = (
+        a[i].astype(np.int64) for i in ('class_start', 'ap_start',
+                                        'ap_column'))
+    n_refs, n_rows = len(a['norms']), len(a['ap_column'])
+    shapes_ok = (class_start.shape == ap_start.shape == (n_classes + 1,)
+                 and a['norms'].ndim == 1
+                 and a['scale'].shape == (n_rows,) and
                  a['xy'].shape == (n_refs, 2) and
                  a['sigma'].shape == (n_classes,))
-    if not shapes_ok or not all(np.isfinite(v).all() for v in a.values()) \
-            or not all((i == np.round(i)).all() and (i >= 0).all()
-                       for i in index):
+    if not shapes_ok or class_start[0] != 0 or class_start[-1] != n_refs \
+            or ap_start[0] != 0 or ap_start[-1] != n_rows or \
+            (np.diff(class_start) < 0).any() or (np.diff(ap_start) < 0).any():
         raise ModelFileError('position: reference arrays of wrong shape or '
-                             'values')
-    class_start, column_start = (i.astype(np.int64) for i in index[:2])
-    entry_ref = a['entry_ref'].astype(np.int32)
-    flat = column_start.ravel()
-    if class_start[0] != 0 or class_start[-1] != n_refs or \
-            (np.diff(class_start) < 0).any() or flat[0] != 0 or \
-            (np.diff(flat) < 0).any() or flat[-1] != n_entries or \
-            (entry_ref >= n_refs).any() or not (a['sigma'] > 0).all():
-        raise ModelFileError('position: inconsistent reference index')
-    per_class = np.diff(np.append(column_start[:, 0], n_entries))
-    entry_class = np.repeat(np.arange(n_classes), per_class)
-    if (entry_ref < class_start[entry_class]).any() or \
-            (entry_ref >= class_start[entry_class + 1]).any():
-        raise ModelFileError('position: a reference outside its class')
-    return Locator(origin, class_start, column_start, entry_ref,
-                   a['entry_value'], a['norms'], a['xy'], a['sigma'], k,
-                   tuple(columns))
+                             'inconsistent index')
+    if a['codes'].shape != (int(np.diff(class_start) @ np.diff(ap_start)),) \
+            or (np.abs(a['codes']) > LEVELS).any() or \
+            (a['codes'] != np.round(a['codes'])).any():
+        raise ModelFileError(f'position: codes must be integers in '
+                             f'[-{LEVELS}, {LEVELS}], one per row and '
+                             f'reference of each class')
+    for c in range(n_classes):
+        mine = ap_column[ap_start[c]:ap_start[c + 1]]
+        if (mine >= n_aps).any() or (np.diff(mine) <= 0).any():
+            raise ModelFileError(f'position: the AP columns of class {c} '
+                                 f'are not ascending model columns')
+    if not (a['sigma'] > 0).all() or (a['scale'] < 0).any():
+        raise ModelFileError('position: sigma must be > 0 and scales >= 0')
+    return Locator(origin, class_start, ap_start, ap_column, a['scale'],
+                   a['codes'].astype(np.int8), a['norms'], a['xy'],
+                   a['sigma'], n_aps, k, tuple(columns))
 
 
 def _layers(specs, arrays, n_inputs, n_outputs):

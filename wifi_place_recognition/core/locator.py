@@ -5,18 +5,22 @@ Distance-weighted k-NN among the reference scans of the building/floor the
 classifier recognised. References live in the model's input space,
 relative to a scan that detects nothing (where every representation and
 scaling puts an undetected AP at a constant), so a scan is sparse: only
-its detected APs are non-zero. They are stored by AP column (for each
-class and AP, the references that detected it), so a query touches only
-the references that share one of its APs, a few thousand numbers.
-Coordinates are kept relative to a float64 origin.
+its detected APs are non-zero. Each class keeps a dense block over the APs
+its references detect, one row per AP, quantised to int8 with a scale per
+row (a step of 1/127 of the row's largest value; the distances are those
+of the quantised references): a query reads the rows of its own APs, a
+few dozen contiguous rows, in one matrix-vector product. Coordinates are
+kept relative to a float64 origin.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 #: Radius of the 95 % circle of a 2-D isotropic Gaussian, in sigmas.
 R95 = float(np.sqrt(-2 * np.log(0.05)))
+#: Largest int8 code of a reference value.
+LEVELS = 127
 
 
 @dataclass
@@ -30,14 +34,32 @@ class Locator:
 
     origin: np.ndarray    # float64 (2,)
     class_start: np.ndarray  # int64 (k + 1,): references of class c
-    column_start: np.ndarray  # int64 (k, n_aps + 1): entries by AP column
-    entry_ref: np.ndarray  # int32: reference of each entry
-    entry_value: np.ndarray  # float32: its input value (relative)
+    ap_start: np.ndarray  # int64 (k + 1,): rows of class c in ap_column
+    ap_column: np.ndarray  # int64: the model AP column of each row
+    scale: np.ndarray     # float32: per row, reference input = code * scale
+    codes: np.ndarray     # int8: class by class, (rows, references) blocks
     norms: np.ndarray     # float32 (n_refs,): squared norm of each reference
     xy: np.ndarray        # float32 (n_refs, 2): position - origin
     sigma: np.ndarray     # float32 (k,)
+    n_aps: int            # width of the model's AP vector
     neighbours: int = 5
     columns: tuple = ('X', 'Y')
+    blocks: list = field(init=False, repr=False)   # views into codes
+    row_of: np.ndarray = field(init=False, repr=False)  # (k, n_aps), -1
+
+    def __post_init__(self):
+        """Index the blocks: each class's rows by model AP column."""
+        k = len(self.class_start) - 1
+        refs = np.diff(self.class_start)
+        rows = np.diff(self.ap_start)
+        ends = np.cumsum(rows * refs)
+        self.blocks = [self.codes[end - n * m:end].reshape(n, m)
+                       for end, n, m in zip(ends, rows, refs)]
+        self.row_of = np.full((k, self.n_aps), -1, np.int32)
+        for c in range(k):
+            self.row_of[c, self.ap_column[self.ap_start[c]:
+                                          self.ap_start[c + 1]]] = \
+                np.arange(rows[c])
 
     @classmethod
     def build(cls, inputs, classes, xy, n_classes, neighbours=5,
@@ -51,28 +73,28 @@ class Locator:
         inputs, classes, xy = inputs[order], classes[order], xy[order]
         origin = xy.mean(axis=0)
         class_start = np.searchsorted(classes, np.arange(n_classes + 1))
-        n_aps = inputs.shape[1]
-        column_start = np.zeros((n_classes, n_aps + 1), np.int64)
-        refs, values = [], []
-        done = 0
+        aps, scales, codes, norms = [], [], [], []
         for c in range(n_classes):
             block = inputs[class_start[c]:class_start[c + 1]]
-            col, row = np.nonzero(block.T)   # column-major order
-            refs.append(row + class_start[c])
-            values.append(block[row, col])
-            counts = np.bincount(col, minlength=n_aps)
-            column_start[c] = done + np.concatenate([[0], np.cumsum(counts)])
-            done += len(row)
+            detected = np.flatnonzero((block != 0).any(axis=0))
+            rows = block[:, detected].T.astype(np.float64)
+            scale = (np.abs(rows).max(axis=1) / LEVELS).astype(np.float32)
+            code = np.rint(rows / scale[:, None]).astype(np.int8)
+            aps.append(detected)
+            scales.append(scale)
+            codes.append(code.ravel())
+            norms.append(((code * scale[:, None].astype(np.float64)) ** 2)
+                         .sum(axis=0))
         if sigma is None:
             sigma = np.full(n_classes, np.nan)
-        return cls(origin, class_start, column_start,
-                   np.concatenate(refs).astype(np.int32),
-                   np.concatenate(values).astype(np.float32),
-                   (inputs.astype(np.float64) ** 2).sum(axis=1)
-                   .astype(np.float32),
+        return cls(origin, class_start,
+                   np.concatenate([[0], np.cumsum([len(a) for a in aps])]),
+                   np.concatenate(aps).astype(np.int64),
+                   np.concatenate(scales), np.concatenate(codes),
+                   np.concatenate(norms).astype(np.float32),
                    (xy - origin).astype(np.float32),
-                   np.asarray(sigma, np.float32), int(neighbours),
-                   tuple(columns))
+                   np.asarray(sigma, np.float32), inputs.shape[1],
+                   int(neighbours), tuple(columns))
 
     def locate(self, columns, values, c, neighbours=None):
         """
@@ -89,13 +111,11 @@ class Locator:
         first, last = self.class_start[c], self.class_start[c + 1]
         if first == last:
             return np.empty(0)
-        starts = self.column_start[c, columns]
-        ends = self.column_start[c, np.asarray(columns) + 1]
-        lengths = ends - starts
-        entries = ranges(starts, lengths)
-        dots = np.bincount(self.entry_ref[entries] - first,
-                           self.entry_value[entries] *
-                           np.repeat(values, lengths), last - first)
+        rows = self.row_of[c, columns]
+        shared = rows >= 0
+        rows = rows[shared]
+        query = values[shared] * self.scale[self.ap_start[c] + rows]
+        dots = query @ self.blocks[c][rows].astype(np.float32)
         return np.sqrt(np.maximum(
             self.norms[first:last] + float(np.dot(values, values))
             - 2 * dots, 0.0))
@@ -113,19 +133,6 @@ class Locator:
         weight = 1.0 / np.maximum(distance[nearest], 1e-6)
         xy = weight @ self.xy[self.class_start[c] + nearest] / weight.sum()
         return self.origin + xy, float(self.sigma[c])
-
-
-def ranges(starts, lengths):
-    """Return the indices of the ranges [start, start + length), joined."""
-    offsets = np.cumsum(lengths) - lengths
-    return np.repeat(starts - offsets, lengths) + np.arange(lengths.sum())
-
-
-def sparse_rows(inputs):
-    """Yield (columns, values) of each row's non-zero inputs."""
-    for row in inputs:
-        columns = np.flatnonzero(row)
-        yield columns, row[columns]
 
 
 def calibrated_sigma(errors, predicted, n_classes, min_scans=30):

@@ -27,8 +27,9 @@ ACTIVATIONS = {'relu': _relu, 'elu': _elu, 'linear': _identity,
 def mean_softmax(member_logits):
     """Return the mean over members (first axis) of softmax(logits)."""
     x = np.asarray(member_logits)
-    x = np.exp(x - x.max(axis=-1, keepdims=True))
-    return (x / x.sum(axis=-1, keepdims=True)).mean(axis=0)
+    x = np.exp(x - np.maximum.reduce(x, axis=-1, keepdims=True))
+    x /= np.add.reduce(x, axis=-1, keepdims=True)
+    return np.add.reduce(x, axis=0) / len(x)
 
 
 @dataclass
@@ -89,15 +90,18 @@ class PlaceModel:
                 proba[np.arange(len(best)), best], proba)
 
     def sparse(self, rssi):
-        """
-        Return (columns, inputs) of one (n_aps,) scan's detected APs.
-
-        The inputs are relative to a scan that detects nothing: what the
-        forward pass and the position search work on.
-        """
+        """Return (columns, inputs) of one (n_aps,) scan's detected APs."""
         columns = np.flatnonzero(~np.isnan(rssi))
-        return columns, (self.scaler.transform(rssi[columns], columns)
-                         - self.blank[columns])
+        return columns, self.relative(columns, rssi[columns])
+
+    def relative(self, columns, rssi):
+        """
+        Return the inputs of readings ``rssi`` (dBm) of AP ``columns``.
+
+        They are relative to a scan that detects nothing: what the forward
+        pass and the position search work on.
+        """
+        return self.scaler.transform(rssi, columns) - self.blank[columns]
 
     def locate(self, rssi):
         """
@@ -162,7 +166,7 @@ class ScanForward:
         Return class probabilities (k,) of one scan.
 
         ``columns``, ``inputs``: its detected APs, from
-        :meth:`PlaceModel.sparse`.
+        :meth:`PlaceModel.relative` or :meth:`PlaceModel.sparse`.
         """
         x = self.first_act(self.first_bias + inputs @ self.first_t[columns])
         x = x.reshape(self.shape)

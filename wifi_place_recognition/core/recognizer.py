@@ -48,7 +48,7 @@ class PlaceRecognizer:
     fewer than ``min_known_aps`` APs of the scan are known to the model.
     :meth:`classify` raises :class:`ScanRejected` for a scan it cannot use.
     ``forward(columns, inputs)`` turns a scan's detected APs
-    (:meth:`PlaceModel.sparse`) into class probabilities (default: the numpy
+    (:meth:`PlaceModel.relative`) into class probabilities (default: the numpy
     :class:`ScanForward` of ``model``). A model with a position output
     also places the scan (:class:`.locator.Locator`). With a
     ``tracker`` (:meth:`track`), scans given a time are tracked over time
@@ -76,7 +76,8 @@ class PlaceRecognizer:
         ``time`` (s) is when the scan was taken; tracking needs it.
         """
         scan = self.mapper.map(names, rssi)
-        columns, inputs = self.model.sparse(scan.rssi)
+        columns = scan.columns
+        inputs = self.model.relative(columns, scan.rssi)
         proba = self.forward(columns, inputs)
         best = int(proba.argmax())
         scan_building, scan_floor = (int(v) for v in self.model.classes[best])

@@ -37,6 +37,8 @@ def plausible(rssi):
 def clip_plausible(rssi):
     """Return ``(rssi, n_clipped)``; NaN cells mean "not detected"."""
     rssi = np.asarray(rssi, dtype=np.float64)
+    if rssi.size and MIN_DBM <= rssi.min() and rssi.max() <= MAX_DBM:
+        return rssi, 0      # the usual scan: nothing to refuse or clip
     bad = ~(plausible(rssi) | np.isnan(rssi))
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])

@@ -36,9 +36,10 @@ class ScanRejected(ValueError):
 
 @dataclass
 class MappedScan:
-    """A scan on the model's AP vector (NaN = not detected)."""
+    """A scan's known APs: model columns (ascending) and their RSSI."""
 
-    rssi: np.ndarray
+    columns: np.ndarray  # int64, each model AP at most once
+    rssi: np.ndarray     # float64 dBm, the strongest reading of each
     known: int
     unknown: int
     clipped: int
@@ -88,7 +89,7 @@ class ScanMapper:
 
     def map(self, names, rssi):
         """
-        Return a :class:`MappedScan`; raise :class:`ScanRejected`.
+        Return the :class:`MappedScan` of one scan; raise ScanRejected.
 
         An AP seen twice keeps its strongest reading; unknown APs are
         ignored and counted; RSSI follows the rule of :mod:`.rssi`.
@@ -115,9 +116,14 @@ class ScanMapper:
             raise ScanRejected(kind, f'{name}: {exc}') from None
         cols = self.columns(names)
         known = cols >= 0
-        n_known = len(set(cols[known].tolist()))
-        if not n_known:
+        if not known.any():
             raise ScanRejected('no_known_ap', f'none of the {len(names)} APs '
                                f'is known to the model')
-        return MappedScan(self.place(cols, values), n_known,
-                          int((~known).sum()), clipped)
+        values = values[known]
+        order = np.lexsort((-values, cols[known]))  # by column, strongest 1st
+        cols = cols[known][order]
+        first = np.empty(len(cols), bool)  # an AP read twice: its strongest
+        first[0] = True
+        np.not_equal(cols[1:], cols[:-1], out=first[1:])
+        return MappedScan(cols[first], values[order][first],
+                          int(first.sum()), int((~known).sum()), clipped)

@@ -41,11 +41,6 @@ MIN_PROBABILITY = 1e-12
 LOG_FLOOR = math.log(1e-6)
 #: Seconds without a scan after which the belief restarts.
 DEFAULT_TIMEOUT = 600.0
-# Blocks of the constant-velocity model's 4x4 matrices (x, y, vx, vy).
-_IDENTITY4 = np.eye(4)
-_VELOCITY = np.eye(4, k=2)                      # position += dt * velocity
-_POSITION = np.diag([1.0, 1.0, 0.0, 0.0])
-_SPEED = np.diag([0.0, 0.0, 1.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -141,7 +136,8 @@ class PositionFilter:
     Between scans the state moves with its velocity and the covariance grows
     by white-noise acceleration of density ``acceleration_noise``; a track
     starts at the first position, at rest, with speed uncertainty
-    ``speed_sd``.
+    ``speed_sd``. Its 4x4 algebra is written out on floats: at this size
+    numpy's per-call cost is most of the time.
     """
 
     def __init__(self, params):
@@ -150,40 +146,71 @@ class PositionFilter:
 
     def reset(self):
         """Forget the track."""
-        self.state = None     # x, y, vx, vy
-        self.cov = None
+        self.state = None     # [x, y, vx, vy]
+        self.cov = None       # 4x4 nested lists
+
+    @property
+    def xy(self):
+        """Return the position (2,) and its covariance (2, 2), or Nones."""
+        if self.state is None:
+            return None, None
+        return (np.array(self.state[:2]),
+                np.array([row[:2] for row in self.cov[:2]]))
 
     def predict(self, dt):
         """Move the track ``dt`` seconds forward (no-op without a track)."""
         if self.state is None:
             return
-        move = _IDENTITY4 + dt * _VELOCITY
-        self.state = move @ self.state
-        self.cov = move @ self.cov @ move.T + (
-            self.params.acceleration_noise * dt) * (
-                dt * dt / 3 * _POSITION + dt / 2 * _VELOCITY
-                + dt / 2 * _VELOCITY.T + _SPEED)
+        x, y, vx, vy = self.state
+        self.state = [x + dt * vx, y + dt * vy, vx, vy]
+        p = self.cov
+        # F P F^T with F = [[I, dt I], [0, I]]: rows, then columns
+        p = [[p[i][j] + dt * p[i + 2][j] for j in range(4)]
+             if i < 2 else list(p[i]) for i in range(4)]
+        for row in p:
+            row[0] += dt * row[2]
+            row[1] += dt * row[3]
+        q = self.params.acceleration_noise * dt
+        for i in (0, 1):    # white-noise acceleration, per axis
+            p[i][i] += q * dt * dt / 3
+            p[i][i + 2] += q * dt / 2
+            p[i + 2][i] += q * dt / 2
+            p[i + 2][i + 2] += q
+        self.cov = p
 
     def update(self, xy, cov):
         """Add a position ``xy`` (2,) with covariance ``cov`` (2, 2)."""
-        xy = np.asarray(xy, np.float64)
-        cov = None if cov is None else np.asarray(cov, np.float64)
-        if xy.shape != (2,) or cov is None or cov.shape != (2, 2) or \
-                not (np.isfinite(xy).all() and np.isfinite(cov).all()):
+        try:
+            (zx, zy), ((r00, r01), (r10, r11)) = \
+                [float(v) for v in xy], [[float(v) for v in row]
+                                         for row in cov]
+            finite = all(map(math.isfinite, (zx, zy, r00, r01, r10, r11)))
+        except (TypeError, ValueError):     # wrong shape or not numbers
+            finite = False
+        if not finite:
             raise ValueError('a position needs finite xy (2,) and cov '
                              '(2, 2)')
         if self.state is None:
-            self.state = np.concatenate([xy, [0.0, 0.0]])
-            self.cov = np.zeros((4, 4))
-            self.cov[:2, :2] = cov
-            self.cov[2:, 2:] = self.params.speed_sd ** 2 * np.eye(2)
+            v = self.params.speed_sd ** 2
+            self.state = [zx, zy, 0.0, 0.0]
+            self.cov = [[r00, r01, 0.0, 0.0], [r10, r11, 0.0, 0.0],
+                        [0.0, 0.0, v, 0.0], [0.0, 0.0, 0.0, v]]
             return
-        (a, b), (c, d) = self.cov[:2, :2] + cov
-        inverse = np.array([[d, -b], [-c, a]]) / (a * d - b * c)
-        gain = self.cov[:, :2] @ inverse
-        self.state = self.state + gain @ (xy - self.state[:2])
-        self.cov = self.cov - gain @ self.cov[:2, :]
-        self.cov = (self.cov + self.cov.T) / 2
+        p = self.cov
+        a, b = p[0][0] + r00, p[0][1] + r01
+        c, d = p[1][0] + r10, p[1][1] + r11
+        det = a * d - b * c
+        inverse = ((d / det, -b / det), (-c / det, a / det))
+        gain = [(row[0] * inverse[0][0] + row[1] * inverse[1][0],
+                 row[0] * inverse[0][1] + row[1] * inverse[1][1])
+                for row in p]
+        ex, ey = zx - self.state[0], zy - self.state[1]
+        self.state = [s + k0 * ex + k1 * ey
+                      for s, (k0, k1) in zip(self.state, gain)]
+        p = [[p[i][j] - k0 * p[0][j] - k1 * p[1][j] for j in range(4)]
+             for i, (k0, k1) in enumerate(gain)]
+        self.cov = [[(p[i][j] + p[j][i]) / 2 for j in range(4)]
+                    for i in range(4)]
 
 
 class PlaceTracker:
@@ -250,9 +277,7 @@ class PlaceTracker:
         building, floor = self.classes[index]
         track = Track(index, int(building), int(floor),
                       float(self.belief[index]), self.belief, restarted)
-        if self.position.state is not None:
-            track.xy = self.position.state[:2].copy()
-            track.cov = self.position.cov[:2, :2].copy()
+        track.xy, track.cov = self.position.xy
         return track
 
 
@@ -410,7 +435,8 @@ def _tracked_position_error(params, walks, timeout):
             else:
                 track.reset()
             track.update(z, c)
-            total += math.hypot(*(track.state[:2] - true))
+            total += math.hypot(track.state[0] - true[0],
+                                track.state[1] - true[1])
             n += 1
             last = t
     return total / n

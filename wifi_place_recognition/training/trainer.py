@@ -19,9 +19,10 @@ import torch
 from torch import nn
 
 from ..core.metrics import class_index
-from ..core.locator import calibrated_sigma, Locator, ranges
+from ..core.locator import calibrated_sigma, Locator
 from ..core.model import PlaceModel
 from ..core.preprocessing import RssiScaler
+from ..core.scan import ScanMapper
 from ..data.fingerprints import check_trainable
 from .augment import ScanAugmenter
 from .network import PlaceNet, SparseBatch
@@ -89,11 +90,17 @@ class _Inputs:
         for idx in torch.split(order, self.batch_size):
             first = starts[idx.numpy()]
             lengths = starts[idx.numpy() + 1] - first
-            entries = ranges(first, lengths)
+            entries = _ranges(first, lengths)
             offsets = np.cumsum(lengths) - lengths
             yield idx, SparseBatch(torch.from_numpy(cols[entries]),
                                    torch.from_numpy(offsets),
                                    torch.from_numpy(inputs[entries]), blank)
+
+
+def _ranges(starts, lengths):
+    """Return the indices of the ranges [start, start + length), joined."""
+    offsets = np.cumsum(lengths) - lengths
+    return np.repeat(starts - offsets, lengths) + np.arange(lengths.sum())
 
 
 def _predicted(net, x, proba):
@@ -171,6 +178,17 @@ def best_epoch(mean, window=3):
 NEIGHBOURS = (3, 5, 7, 10)
 
 
+@dataclass
+class _Split:
+    """One selection run: scans to train on, scans to score."""
+
+    kept: object            # Fingerprints the network is trained on
+    y: np.ndarray           # their class indices
+    held_rssi: np.ndarray   # scans held out, on the training AP columns
+    held_y: np.ndarray      # their class indices
+    held_position: object   # their positions (n, 2), or None
+
+
 def cross_validate(fp, y, n_classes, config, log=print):
     """
     Return the selection summary: per-fold curves, their mean, the choice.
@@ -181,59 +199,109 @@ def cross_validate(fp, y, n_classes, config, log=print):
     kept scans of the class predicted at the chosen epoch count: that
     chooses k and calibrates the position sigma per class.
     """
-    folds = grouped_folds(fp, y.numpy(), config.folds, config.grouping,
-                          config.seed)
+    y = np.asarray(y)
+    folds = grouped_folds(fp, y, config.folds, config.grouping, config.seed)
     log(f'cross-validation: {len(folds.held_out)} folds of whole '
         f'{folds.grouping} groups ({folds.groups} groups'
         + (f'; {folds.note}' if folds.note else '') + ')')
+    splits = [_Split(fp.subset(~held), y[~held], fp.rssi[held], y[held],
+                     None if fp.position is None else fp.position[held])
+              for held in folds.held_out]
+    return dict(_select(splits, n_classes, config, log),
+                grouping=folds.grouping, note=folds.note,
+                groups=folds.groups, never_held_out=folds.never_held_out)
+
+
+def validate(fp, y, classes, validation, config, log=print):
+    """
+    Return the selection summary of a separate validation set.
+
+    As :func:`cross_validate`, with one run: the network trained on all of
+    ``fp`` scores ``validation`` (Fingerprints of the same building(s))
+    after every epoch. Its scans must belong to classes of ``fp``; scans
+    without any AP known to ``fp`` are left out.
+    """
+    rssi = ScanMapper(fp.ap_ids).map_rows(validation.ap_ids, validation.rssi)
+    usable = ~np.isnan(rssi).all(axis=1)
+    index = {(int(b), int(f)): i for i, (b, f) in enumerate(classes)}
+    held_y = np.array([index.get((int(b), int(f)), -1) for b, f in
+                       zip(validation.building, validation.floor)], np.int64)
+    if (held_y < 0).any():
+        b, f = (validation.building[held_y < 0][0],
+                validation.floor[held_y < 0][0])
+        raise ValueError(f'validation data {validation.source}: building '
+                         f'{b} floor {f} ({int((held_y < 0).sum())} scans) '
+                         f'is not in the training data')
+    if not usable.any():
+        raise ValueError(f'validation data {validation.source}: no scan '
+                         f'detects an AP of the training data')
+    position = None
+    if fp.position is not None and validation.position is not None:
+        if tuple(validation.position_columns) != tuple(fp.position_columns):
+            raise ValueError(f'validation data {validation.source}: '
+                             f'positions in columns '
+                             f'{",".join(validation.position_columns)}, the '
+                             f'training data\'s in '
+                             f'{",".join(fp.position_columns)}')
+        position = validation.position[usable]
+    log(f'selection on the validation data: {int(usable.sum())} scans '
+        f'({int((~usable).sum())} without a known AP left out)')
+    split = _Split(fp, np.asarray(y), rssi[usable], held_y[usable], position)
+    return dict(_select([split], n_classes=len(classes), config=config,
+                        log=log),
+                grouping='validation', note=validation.source, groups=1,
+                never_held_out=[])
+
+
+def _select(splits, n_classes, config, log):
+    """Train and score each split; return curves, the choice, positions."""
     runs, fold_info = [], []
-    for k, held in enumerate(folds.held_out):
-        scaler = config_scaler(config).fit(fp.rssi[~held])
-        held_out = (torch.from_numpy(scaler.transform(fp.rssi[held])),
-                    y[held])
-        log(f'fold {k + 1}/{len(folds.held_out)}: {int((~held).sum())} '
-            f'scans train, {int(held.sum())} held out')
+    for k, split in enumerate(splits):
+        scaler = config_scaler(config).fit(split.kept.rssi)
+        held_out = (torch.from_numpy(scaler.transform(split.held_rssi)),
+                    torch.from_numpy(split.held_y))
+        log(f'fold {k + 1}/{len(splits)}: {len(split.y)} scans train, '
+            f'{len(split.held_y)} held out')
         _, predictions = fit_network(
-            fp.rssi[~held], y[~held], n_classes, scaler, config,
-            config.epochs, config.seed + 1000 * (k + 1), held_out, log)
-        runs.append((held, scaler, predictions))
-        fold_info.append({'held_out_scans': int(held.sum()),
-                          'classes': sorted(set(y[held].tolist()))})
-    truth = y.numpy()
-    curves = np.array([[(c == truth[held]).mean() for c in predictions]
-                       for held, _, predictions in runs])
+            split.kept.rssi, torch.from_numpy(split.y), n_classes, scaler,
+            config, config.epochs, config.seed + 1000 * (k + 1), held_out,
+            log)
+        runs.append((scaler, predictions))
+        fold_info.append({'held_out_scans': len(split.held_y),
+                          'classes': sorted(set(split.held_y.tolist()))})
+    curves = np.array([[(c == split.held_y).mean() for c in predictions]
+                       for split, (_, predictions) in zip(splits, runs)])
     mean = curves.mean(axis=0)
     best = best_epoch(mean)
-    summary = {'grouping': folds.grouping, 'note': folds.note,
-               'groups': folds.groups, 'never_held_out': folds.never_held_out,
-               'folds': fold_info, 'curves': np.round(curves, 5).tolist(),
+    summary = {'folds': fold_info, 'curves': np.round(curves, 5).tolist(),
                'mean_curve': np.round(mean, 5).tolist(), 'epochs': best + 1,
                'accuracy_mean': float(mean[best]),
                'accuracy_min': float(curves[:, best].min()),
                'accuracy_max': float(curves[:, best].max())}
-    if fp.position is not None:
+    if all(s.kept.position is not None and s.held_position is not None
+           for s in splits):
         summary.update(_cross_validate_position(
-            fp, truth, n_classes, config,
-            [(held, scaler, predictions[best])
-             for held, scaler, predictions in runs], log))
+            splits, [(scaler, predictions[best])
+                     for scaler, predictions in runs], n_classes, config,
+            log))
     return summary
 
 
-def _cross_validate_position(fp, y, n_classes, config, runs, log):
+def _cross_validate_position(splits, runs, n_classes, config, log):
     """Return the chosen k, its held-out errors (m) and sigma per class."""
     candidates = (config.neighbours,) if config.neighbours else NEIGHBOURS
     errors = {k: [] for k in candidates}
     predicted = []
-    for held, scaler, classes in runs:
-        locator = _locator(fp.subset(~held), y[~held], n_classes, scaler)
-        rows = list(_sparse_inputs(fp.rssi[held], scaler))
-        truth = fp.position[held]
+    for split, (scaler, classes) in zip(splits, runs):
+        locator = _locator(split.kept, split.y, n_classes, scaler)
+        rows = list(_sparse_inputs(split.held_rssi, scaler))
         distances = [locator.distances(columns, inputs, c)
                      for (columns, inputs), c in zip(rows, classes)]
         for k in candidates:
             xy = np.array([locator.weighted(d, k, c)[0]
                            for d, c in zip(distances, classes)])
-            errors[k].append(np.linalg.norm(xy - truth, axis=1))
+            errors[k].append(np.linalg.norm(xy - split.held_position,
+                                            axis=1))
         predicted.append(classes)
     mean = {k: float(np.nanmean(np.concatenate(e)))
             for k, e in errors.items()}
@@ -273,14 +341,15 @@ def config_scaler(config):
                       config.representation)
 
 
-def train(fp, config, log=print):
+def train(fp, config, log=print, validation=None):
     """
     Train on :class:`Fingerprints`; return (PlaceModel, nets, report).
 
-    With ``config.folds`` the epoch count is chosen by grouped
-    cross-validation, else ``config.epochs`` is used; then
-    ``config.ensemble`` networks (seeds ``seed``, ``seed + 1`` …) are
-    trained on all scans.
+    The epoch count (and the position's k and sigma) is chosen on
+    ``validation`` (Fingerprints) when given, else by grouped
+    cross-validation with ``config.folds``, else ``config.epochs`` is
+    used; then ``config.ensemble`` networks (seeds ``seed``, ``seed + 1``
+    …) are trained on all scans of ``fp``.
     """
     start = time.perf_counter()
     check_trainable(fp)
@@ -292,11 +361,15 @@ def train(fp, config, log=print):
     classes, y = class_index(fp.building, fp.floor)
     y = torch.from_numpy(y)
     report.epochs = config.epochs
-    if config.folds:
+    if validation is not None:
+        report.selection = validate(fp, y.numpy(), classes, validation,
+                                    config, log)
+    elif config.folds:
         report.selection = cross_validate(fp, y, len(classes), config, log)
+    if report.selection:
         report.epochs = report.selection['epochs']
         s = report.selection
-        log(f'cross-validated building+floor {s["accuracy_mean"]:.4f} '
+        log(f'held-out building+floor {s["accuracy_mean"]:.4f} '
             f'({s["accuracy_min"]:.4f}-{s["accuracy_max"]:.4f} over folds) '
             f'at {report.epochs} epochs')
     scaler = config_scaler(config).fit(fp.rssi)
@@ -308,13 +381,14 @@ def train(fp, config, log=print):
                                 report.epochs, config.seed + k,
                                 log=log)[0])
     position = None
-    if fp.position is not None and config.folds:
+    if fp.position is not None and 'sigma_m' in report.selection:
         position = _locator(fp, y.numpy(), len(classes), scaler,
                             report.selection['neighbours'],
                             report.selection['sigma_m'])
     elif fp.position is not None:
-        log('no position output: its uncertainty is calibrated on the '
-            'folds (folds 0)')
+        log('no position output: its uncertainty is calibrated on held-out '
+            'scans with positions (none with folds 0, or validation data '
+            'without positions)')
     report.seconds = time.perf_counter() - start
     provenance = {
         'config': asdict(config),
@@ -323,6 +397,9 @@ def train(fp, config, log=print):
                           report.dropped_empty, 'clipped_cells': fp.clipped},
         'selection': {k: v for k, v in report.selection.items()
                       if k != 'curves'},
+        'validation_data': None if validation is None else {
+            'source': validation.source, 'sha256': validation.sha256,
+            'scans': len(validation)},
         'epochs': report.epochs,
         'train_seconds': round(report.seconds, 2),
         'versions': {'torch': torch.__version__, 'numpy': np.__version__},
