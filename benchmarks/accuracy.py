@@ -4,15 +4,17 @@ Accuracy benchmark: recipes against k-NN and a random forest, several seeds.
 The default and the paper's recipe against k-NN and a random forest, in one
 run; or (``--suite search``) the cross-validation of variants alone.
 
-Protocol (``--suite default``, ``table1``, ``architecture``): each recipe is
-trained by the documented command (``train_model``, in a subprocess whose
-wall time and peak memory are measured) on the dataset's training part and
-evaluated by ``evaluate_model`` on its test part. Everything the recipe
+Protocol (``--suite default``, ``table1``, ``architecture``,
+``validation``): each recipe is trained by the documented command
+(``train_model``, in a subprocess whose wall time and peak memory are
+measured) on the dataset's training part and evaluated by
+``evaluate_model`` on its test part. Everything the recipe
 chooses (the epoch count, k and the representation of k-NN) is chosen by
 grouped cross-validation on the training part: whole devices
 (UJIIndoorLoc PHONEID) or whole walks (WiFine files). The test part is only
 ever evaluated. Prints a table (mean and min-max over seeds) and writes
-JSON.
+JSON. ``--suite validation`` (WiFine) selects on the dataset's validation
+part (``train_model --validation``) instead of the folds.
 
 ``--suite search`` runs only the cross-validation of each variant (no test
 file at all): the selection log of benchmarks/README.md comes from it.
@@ -23,6 +25,7 @@ ensemble size (no test file either).
 
     python benchmarks/accuracy.py --dataset ujiindoorloc --suite default
     python benchmarks/accuracy.py --dataset wifine --suite default
+    python benchmarks/accuracy.py --dataset wifine --suite validation
 """
 
 import argparse
@@ -68,8 +71,11 @@ DATASETS = {
                          test=['ujiindoorloc/validationData-public.csv'],
                          options={}, args=[]),
     'wifine': dict(train=['wifine/train'], test=['wifine/test'],
-                   options=WIFINE_OPTIONS, args=WIFINE_ARGS),
+                   validation=['wifine/val'], options=WIFINE_OPTIONS,
+                   args=WIFINE_ARGS),
 }
+#: Stands for the dataset's validation part in a recipe's flags.
+VALIDATION = '<validation>'
 
 
 def _flags(overrides):
@@ -96,6 +102,10 @@ SUITES = {
         'missing -110, per-AP scaling': PAPER_FLAGS + _flags(dict(
             scaling='independent')),
         'missing -110, joint scaling': PAPER_FLAGS,
+    },
+    'validation': {
+        'default, selection on the validation part': ['--validation',
+                                                      VALIDATION],
     },
     'architecture': {
         'SAE 256 + 128-128': PAPER_FLAGS + ['--sae-layers', '256'],
@@ -127,6 +137,8 @@ def train_and_test(flags, seed, paths, data, folder):
     """Train by the documented command; return the test figures."""
     model = Path(folder) / f'model-{seed}.npz'
     cli = [sys.executable, '-m', 'wifi_place_recognition.cli.']
+    flags = [f for flag in flags for f in (
+        paths['validation'] if flag == VALIDATION else [flag])]
     _, seconds, peak = _measured(
         [cli[0], cli[1], cli[2] + 'train_model', '--data', *paths['train'],
          *data['args'], '-o', model, '--seed', str(seed), '--quiet',
@@ -321,8 +333,10 @@ def main():
     p.add_argument('--out', type=Path, default=None)
     args = p.parse_args()
     data = DATASETS[args.dataset]
-    paths = {part: [str(args.datasets / f) for f in data[part]]
-             for part in ('train', 'test')}
+    paths = {part: [str(args.datasets / f) for f in data.get(part, [])]
+             for part in ('train', 'test', 'validation')}
+    if args.suite == 'validation' and not paths['validation']:
+        p.error(f'{args.dataset} has no validation part')
     out = args.out or ROOT / 'benchmarks' / 'results' / \
         f'{args.dataset}-{args.suite}.json'
     options = ReaderOptions(**data['options'])
@@ -336,6 +350,8 @@ def main():
         return
     test_fp = read_fingerprints(paths['test'], role='test', options=options)
     protocol.update(test=paths['test'], test_sha256=test_fp.sha256)
+    if args.suite == 'validation':
+        protocol.update(validation=paths['validation'])
     runs = {}
     with tempfile.TemporaryDirectory() as folder:
         for seed in args.seeds:

@@ -5,7 +5,9 @@ For each variant, in one run: time from process start to first answer,
 cross-process latency scan-publish -> place-received over >= 1,000 scans in
 lockstep (median, p99), in-node processing time (the node's latency_ms),
 sustained scans/s under a flood (answered per second, dropped counted),
-and the node's RSS. Ratios are torch / numpy from the same run.
+and the node's RSS. Ratios are torch / numpy from the same run. Then, in
+this process (steadier than across processes), the shipped model's
+``PlaceRecognizer.classify`` with tracking on, and each of its stages.
 
     python benchmarks/node.py --data validationData-public.csv
 """
@@ -28,7 +30,11 @@ from sensor_msgs.msg import JointState
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+from wifi_place_recognition.core.artifact import load_model  # noqa: E402
 from wifi_place_recognition.core.atomic import atomic_write  # noqa: E402
+from wifi_place_recognition.core.recognizer import PlaceRecognizer  # noqa
+from wifi_place_recognition.core.resources import default_model_path  # noqa
+from wifi_place_recognition.core.tracking import PlaceTracker  # noqa: E402
 from wifi_place_recognition.data.fingerprints import read_fingerprints  # noqa
 from wifi_place_recognition.ros.messages import (  # noqa: E402
     scan_message, status_values)
@@ -129,6 +135,50 @@ def measure(bench, argv, fp, scans, flood_s):
     }
 
 
+def stages(fp, passes=3):
+    """
+    Return {stage: (median ms, p99 ms)} of classify and its stages.
+
+    Each scan of ``fp`` (its detected APs, as a node receives them) goes
+    through the stages one by one, then through ``classify`` as a whole;
+    scans are 5 s apart so that the tracker keeps its belief.
+    """
+    model = load_model(default_model_path())
+    recognizer = PlaceRecognizer(model)
+    recognizer.track(True, 60.0)
+    tracker = PlaceTracker(model.classes, model.tracking, 60.0)
+    scans = []
+    for row in fp.rssi:
+        seen = np.flatnonzero(np.isfinite(row))
+        scans.append(([fp.ap_ids[j] for j in seen], row[seen].tolist()))
+    times = {k: [] for k in ('map', 'inputs', 'forward', 'position',
+                             'tracking', 'classify')}
+    clock, t = time.perf_counter, 0.0
+    for _ in range(passes):
+        for names, rssi in scans:
+            t += 5.0
+            t0 = clock()
+            scan = recognizer.mapper.map(names, rssi)
+            t1 = clock()
+            inputs = model.relative(scan.columns, scan.rssi)
+            t2 = clock()
+            proba = recognizer.forward(scan.columns, inputs)
+            t3 = clock()
+            xy, sigma = model.position.locate(scan.columns, inputs,
+                                              int(proba.argmax()))
+            t4 = clock()
+            tracker.update(t, proba, xy, np.eye(2) * sigma ** 2)
+            t5 = clock()
+            recognizer.classify(names, rssi, t + 2.5)
+            t6 = clock()
+            for key, a, b in (('map', t0, t1), ('inputs', t1, t2),
+                              ('forward', t2, t3), ('position', t3, t4),
+                              ('tracking', t4, t5), ('classify', t5, t6)):
+                times[key].append((b - a) * 1e3)
+    return {k: (statistics.median(v), float(np.percentile(v, 99)))
+            for k, v in times.items()}
+
+
 def main():
     """Measure both variants; print a table; write JSON."""
     p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -171,11 +221,19 @@ def main():
     for label, key in rows:
         print(f'| {label} | {base[key]:.3f} | {other[key]:.3f} | '
               f'{other[key] / base[key]:.2f} |')
+    profile = stages(fp)
+    print(f'\nin this process, shipped model, tracking on, {len(fp)} scans '
+          f'x 3')
+    print('| stage | median (ms) | p99 (ms) |')
+    print('|---|---|---|')
+    for key, (median, p99) in profile.items():
+        print(f'| {key} | {median:.3f} | {p99:.3f} |')
     args.out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(args.out, 'w') as f:
         json.dump({'data': fp.source, 'scans': args.scans,
                    'flood_seconds': args.flood_seconds,
-                   'results': results}, f, indent=1)
+                   'results': results, 'in_process_ms': profile}, f,
+                  indent=1)
     print(f'wrote {args.out}')
 
 

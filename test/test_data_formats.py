@@ -284,8 +284,10 @@ def test_offline_mapping_is_the_nodes_mapping(synthetic):
     for row, mapped in zip(fp.rssi, offline):
         seen = np.isfinite(row)                   # what a scan would list
         names = [n for n, s in zip(fp.ap_ids, seen) if s]
-        np.testing.assert_array_equal(mapped, mapper.map(names,
-                                                         row[seen]).rssi)
+        scan = mapper.map(names, row[seen])
+        online = np.full(len(model.ap_ids), np.nan, np.float32)
+        online[scan.columns] = scan.rssi
+        np.testing.assert_array_equal(mapped, online)
     assert offline[:, 0].tolist() == [-40, -55, -60, -60]
 
     read = parse(f'{dashed},{a.lower()},{b},FLOOR,BUILDINGID\n'

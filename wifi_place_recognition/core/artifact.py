@@ -9,6 +9,7 @@ leaves the previous file intact.
 """
 
 import ctypes
+import hashlib
 import json
 import zipfile
 from pathlib import Path
@@ -20,16 +21,6 @@ from .locator import LEVELS, Locator
 from .model import ACTIVATIONS, Layer, PlaceModel
 from .preprocessing import RssiScaler
 from .tracking import TrackingParams
-
-# SHA-256 from CPython's built-in module (_sha2 from 3.12, _sha256 before):
-# hashlib would load OpenSSL, about 4 MiB resident in a node that needs none.
-try:
-    from _sha2 import sha256
-except ImportError:
-    try:
-        from _sha256 import sha256
-    except ImportError:
-        from hashlib import sha256
 
 FORMAT = 'wifi_place_recognition/model'
 SCHEMA_VERSION = 2     # 2: the locator's references as int8 blocks
@@ -47,7 +38,7 @@ class ModelFileError(ValueError):
 
 
 def _digest(header, arrays):
-    h = sha256(json.dumps(header, sort_keys=True).encode())
+    h = hashlib.sha256(json.dumps(header, sort_keys=True).encode())
     for name in sorted(arrays):
         a = np.ascontiguousarray(arrays[name])
         h.update(f'{name}|{a.dtype.str}|{a.shape}'.encode())

@@ -64,10 +64,25 @@ class PlaceModel:
     tracking: object = None       # TrackingParams from the file, or None
     position: object = None       # a Locator; None: a classifier only
     blank: np.ndarray = field(init=False, repr=False)
+    first_t: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
-        """Keep the inputs of a scan that detects nothing (the reference)."""
+        """
+        Keep the inputs of a scan that detects nothing (the reference).
+
+        The members' first layers are stored side by side, transposed
+        (``first_t``: one row per AP, what a scan's forward pass gathers);
+        each member's first weight becomes a view into it, not a copy.
+        """
         self.blank = self.scaler.blank()
+        firsts = [layers[0] for layers in self.members]
+        width = firsts[0].weight.shape[0]
+        if any(layer.weight.shape[0] != width for layer in firsts):
+            raise ValueError('the networks of the ensemble differ in shape')
+        self.first_t = np.ascontiguousarray(np.concatenate(
+            [layer.weight.T for layer in firsts], axis=1))
+        for m, layer in enumerate(firsts):
+            layer.weight = self.first_t[:, m * width:(m + 1) * width].T
 
     def predict_proba(self, rssi):
         """Return class probabilities, shape (n, k), for (n, n_aps) RSSI."""
@@ -144,9 +159,7 @@ class ScanForward:
         members = model.members
         first = [layers[0] for layers in members]
         self.width = first[0].weight.shape[0]
-        # every member's first layer side by side: one gather, one product
-        self.first_t = np.ascontiguousarray(np.concatenate(
-            [layer.weight.T for layer in first], axis=1))
+        self.first_t = model.first_t    # one gather, one product
         self.first_bias = np.concatenate(
             [layer.bias + layer.weight @ model.blank for layer in first])
         self.first_act = ACTIVATIONS[first[0].activation]

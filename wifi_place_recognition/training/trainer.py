@@ -182,11 +182,22 @@ NEIGHBOURS = (3, 5, 7, 10)
 class _Split:
     """One selection run: scans to train on, scans to score."""
 
-    kept: object            # Fingerprints the network is trained on
-    y: np.ndarray           # their class indices
+    fp: object              # the training Fingerprints
+    all_y: np.ndarray       # their class indices
+    keep: np.ndarray        # mask of the scans the network is trained on
     held_rssi: np.ndarray   # scans held out, on the training AP columns
     held_y: np.ndarray      # their class indices
     held_position: object   # their positions (n, 2), or None
+
+    @property
+    def kept(self):
+        """Return the Fingerprints trained on (a copy: made when needed)."""
+        return self.fp.subset(self.keep)
+
+    @property
+    def y(self):
+        """Return the class indices of :attr:`kept`."""
+        return self.all_y[self.keep]
 
 
 def cross_validate(fp, y, n_classes, config, log=print):
@@ -204,7 +215,7 @@ def cross_validate(fp, y, n_classes, config, log=print):
     log(f'cross-validation: {len(folds.held_out)} folds of whole '
         f'{folds.grouping} groups ({folds.groups} groups'
         + (f'; {folds.note}' if folds.note else '') + ')')
-    splits = [_Split(fp.subset(~held), y[~held], fp.rssi[held], y[held],
+    splits = [_Split(fp, y, ~held, fp.rssi[held], y[held],
                      None if fp.position is None else fp.position[held])
               for held in folds.held_out]
     return dict(_select(splits, n_classes, config, log),
@@ -246,7 +257,8 @@ def validate(fp, y, classes, validation, config, log=print):
         position = validation.position[usable]
     log(f'selection on the validation data: {int(usable.sum())} scans '
         f'({int((~usable).sum())} without a known AP left out)')
-    split = _Split(fp, np.asarray(y), rssi[usable], held_y[usable], position)
+    split = _Split(fp, np.asarray(y), np.ones(len(fp), bool), rssi[usable],
+                   held_y[usable], position)
     return dict(_select([split], n_classes=len(classes), config=config,
                         log=log),
                 grouping='validation', note=validation.source, groups=1,
@@ -257,15 +269,15 @@ def _select(splits, n_classes, config, log):
     """Train and score each split; return curves, the choice, positions."""
     runs, fold_info = [], []
     for k, split in enumerate(splits):
-        scaler = config_scaler(config).fit(split.kept.rssi)
+        rssi = split.fp.rssi[split.keep]
+        scaler = config_scaler(config).fit(rssi)
         held_out = (torch.from_numpy(scaler.transform(split.held_rssi)),
                     torch.from_numpy(split.held_y))
-        log(f'fold {k + 1}/{len(splits)}: {len(split.y)} scans train, '
+        log(f'fold {k + 1}/{len(splits)}: {len(rssi)} scans train, '
             f'{len(split.held_y)} held out')
         _, predictions = fit_network(
-            split.kept.rssi, torch.from_numpy(split.y), n_classes, scaler,
-            config, config.epochs, config.seed + 1000 * (k + 1), held_out,
-            log)
+            rssi, torch.from_numpy(split.y), n_classes, scaler, config,
+            config.epochs, config.seed + 1000 * (k + 1), held_out, log)
         runs.append((scaler, predictions))
         fold_info.append({'held_out_scans': len(split.held_y),
                           'classes': sorted(set(split.held_y.tolist()))})
@@ -278,7 +290,7 @@ def _select(splits, n_classes, config, log):
                'accuracy_mean': float(mean[best]),
                'accuracy_min': float(curves[:, best].min()),
                'accuracy_max': float(curves[:, best].max())}
-    if all(s.kept.position is not None and s.held_position is not None
+    if all(s.fp.position is not None and s.held_position is not None
            for s in splits):
         summary.update(_cross_validate_position(
             splits, [(scaler, predictions[best])
