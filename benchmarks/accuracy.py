@@ -21,7 +21,9 @@ file at all): the selection log of benchmarks/README.md comes from it.
 ``--suite members`` cross-validates ensembles: in every fold, ``--members``
 networks of the default recipe (seeds apart), and the held-out accuracy of
 the mean of the first m of them at every epoch: the curve that chooses the
-ensemble size (no test file either).
+ensemble size (no test file either). ``--suite ideas`` cross-validates
+k-NN on the network's learned code and test-time augmentation against
+the network itself (no test file).
 
     python benchmarks/accuracy.py --dataset ujiindoorloc --suite default
     python benchmarks/accuracy.py --dataset wifine --suite default
@@ -310,6 +312,64 @@ def members(args, train_fp):
     return {'runs': runs}
 
 
+def ideas(args, train_fp, epochs=8, copies=8):
+    """
+    Cross-validate two uses of the trained network; no test file.
+
+    In every fold one default network (``epochs``: the default's choice
+    at seed 0) scores the held-out phones three ways: its own softmax,
+    k-NN on its learned code (the encoder's output; k 1, 5, 11,
+    distance-weighted), and test-time augmentation (its softmax averaged
+    over the scan and ``copies`` phone-like variations of it).
+    """
+    import torch
+    from wifi_place_recognition.training.augment import ScanAugmenter
+    train_fp = train_fp.subset(~train_fp.empty_rows)
+    classes, y = class_index(train_fp.building, train_fp.floor)
+    runs = []
+    for seed in args.seeds:
+        config = TrainConfig(seed=seed)
+        folds = grouped_folds(train_fp, y, config.folds, config.grouping,
+                              seed)
+        scores = {}
+        for k, held in enumerate(folds.held_out):
+            kept_rssi, held_rssi = train_fp.rssi[~held], train_fp.rssi[held]
+            scaler = config_scaler(config).fit(kept_rssi)
+            net, _ = fit_network(kept_rssi, torch.from_numpy(y[~held]),
+                                 len(classes), scaler, config, epochs,
+                                 seed + 1000 * (k + 1),
+                                 log=lambda line: None)
+            with torch.no_grad():
+                x_kept = torch.from_numpy(scaler.transform(kept_rssi))
+                x_held = torch.from_numpy(scaler.transform(held_rssi))
+                proba = torch.softmax(net(x_held), dim=1).numpy()
+                code_kept = net.encode(x_kept).numpy()
+                code_held = net.encode(x_held).numpy()
+                augmenter = ScanAugmenter(held_rssi, config, seed)
+                tta = proba.copy()
+                for _ in range(copies):
+                    rows, cols, dbm = augmenter.readings()
+                    copy = np.full(held_rssi.shape, np.nan, np.float32)
+                    copy[rows, cols] = dbm
+                    tta += torch.softmax(net(torch.from_numpy(
+                        scaler.transform(copy))), dim=1).numpy()
+            truth = y[held]
+            fold = {'network': (proba.argmax(1) == truth).mean(),
+                    'test-time augmentation': (tta.argmax(1) == truth)
+                    .mean()}
+            for n in (1, 5, 11):
+                knn = KNeighborsClassifier(n, weights='distance')
+                fold[f'k-NN on the code, k={n}'] = (knn.fit(
+                    code_kept, y[~held]).predict(code_held) == truth).mean()
+            for name, value in fold.items():
+                scores.setdefault(name, []).append(float(value))
+        runs.append({'seed': seed, 'epochs': epochs, 'folds': scores})
+        print(f'seed {seed}: ' + ', '.join(
+            f'{name} {np.mean(v):.4f}' for name, v in scores.items()),
+            file=sys.stderr, flush=True)
+    return {'runs': runs}
+
+
 def main():
     """Run a suite; print the table; write JSON."""
     p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -318,7 +378,8 @@ def main():
                    help='folder holding ujiindoorloc/ and wifine/')
     p.add_argument('--dataset', choices=sorted(DATASETS),
                    default='ujiindoorloc')
-    p.add_argument('--suite', choices=sorted(SUITES) + ['search', 'members'],
+    p.add_argument('--suite', choices=sorted(SUITES) + ['search', 'members',
+                                                        'ideas'],
                    default='default')
     p.add_argument('--members', type=int, default=5,
                    help='members: the largest ensemble cross-validated')
@@ -343,9 +404,9 @@ def main():
     train_fp = read_fingerprints(paths['train'], options=options)
     protocol = {'dataset': args.dataset, 'train': paths['train'],
                 'train_sha256': train_fp.sha256, 'seeds': args.seeds}
-    if args.suite in ('search', 'members'):
-        result = (search if args.suite == 'search' else members)(
-            args, train_fp)
+    if args.suite in ('search', 'members', 'ideas'):
+        result = {'search': search, 'members': members,
+                  'ideas': ideas}[args.suite](args, train_fp)
         _write(out, dict(protocol, test=None, **result))
         return
     test_fp = read_fingerprints(paths['test'], role='test', options=options)
