@@ -312,6 +312,13 @@ def members(args, train_fp):
     return {'runs': runs}
 
 
+def _strongest_at(rssi, level=-30.0, floor=-110.0):
+    """Return scans shifted so that their strongest reading is ``level``."""
+    out = rssi + (level - np.nanmax(rssi, axis=1, keepdims=True))
+    out[out < floor] = np.nan
+    return out
+
+
 def ideas(args, train_fp, epochs=8, copies=8):
     """
     Cross-validate two uses of the trained network; no test file.
@@ -320,7 +327,9 @@ def ideas(args, train_fp, epochs=8, copies=8):
     at seed 0) scores the held-out phones three ways: its own softmax,
     k-NN on its learned code (the encoder's output; k 1, 5, 11,
     distance-weighted), and test-time augmentation (its softmax averaged
-    over the scan and ``copies`` phone-like variations of it).
+    over the scan and ``copies`` phone-like variations of it). A second
+    network is trained and scored on per-scan normalised scans (each
+    shifted so that its strongest reading is -30 dBm).
     """
     import torch
     from wifi_place_recognition.training.augment import ScanAugmenter
@@ -354,7 +363,18 @@ def ideas(args, train_fp, epochs=8, copies=8):
                     tta += torch.softmax(net(torch.from_numpy(
                         scaler.transform(copy))), dim=1).numpy()
             truth = y[held]
+            kept_n, held_n = _strongest_at(kept_rssi), _strongest_at(held_rssi)
+            scaler_n = config_scaler(config).fit(kept_n)
+            net_n, _ = fit_network(kept_n, torch.from_numpy(y[~held]),
+                                   len(classes), scaler_n, config, epochs,
+                                   seed + 1000 * (k + 1),
+                                   log=lambda line: None)
+            with torch.no_grad():
+                normalised = net_n(torch.from_numpy(
+                    scaler_n.transform(held_n))).argmax(1).numpy()
             fold = {'network': (proba.argmax(1) == truth).mean(),
+                    'network, per-scan normalised': (normalised == truth)
+                    .mean(),
                     'test-time augmentation': (tta.argmax(1) == truth)
                     .mean()}
             for n in (1, 5, 11):
