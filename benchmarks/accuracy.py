@@ -22,8 +22,8 @@ file at all): the selection log of benchmarks/README.md comes from it.
 networks of the default recipe (seeds apart), and the held-out accuracy of
 the mean of the first m of them at every epoch: the curve that chooses the
 ensemble size (no test file either). ``--suite ideas`` cross-validates
-k-NN on the network's learned code and test-time augmentation against
-the network itself (no test file).
+k-NN on the network's learned code, test-time augmentation and per-scan
+normalisation against the network itself (no test file).
 
     python benchmarks/accuracy.py --dataset ujiindoorloc --suite default
     python benchmarks/accuracy.py --dataset wifine --suite default
@@ -270,19 +270,32 @@ def search(args, train_fp):
     return {'runs': runs}
 
 
+def _default_folds(train_fp, seeds):
+    """
+    Return (scans, classes, y, [(seed, config, held-out masks)]).
+
+    The training scans that detect an AP, their classes, and the default
+    recipe's folds at each seed.
+    """
+    train_fp = train_fp.subset(~train_fp.empty_rows)
+    classes, y = class_index(train_fp.building, train_fp.floor)
+    per_seed = []
+    for seed in seeds:
+        config = TrainConfig(seed=seed)
+        per_seed.append((seed, config, grouped_folds(
+            train_fp, y, config.folds, config.grouping, seed).held_out))
+    return train_fp, classes, y, per_seed
+
+
 def members(args, train_fp):
     """Cross-validate ensembles of 1..``--members`` networks; no test file."""
     import torch
-    train_fp = train_fp.subset(~train_fp.empty_rows)
-    classes, y = class_index(train_fp.building, train_fp.floor)
+    train_fp, classes, y, per_seed = _default_folds(train_fp, args.seeds)
     runs = []
-    for seed in args.seeds:
-        config = TrainConfig(seed=seed)
-        folds = grouped_folds(train_fp, y, config.folds, config.grouping,
-                              seed)
+    for seed, config, held_out in per_seed:
         start = time.perf_counter()
         curves = []     # [fold][m] -> accuracy per epoch of m members
-        for k, held in enumerate(folds.held_out):
+        for k, held in enumerate(held_out):
             scaler = config_scaler(config).fit(train_fp.rssi[~held])
             x = torch.from_numpy(scaler.transform(train_fp.rssi[held]))
             proba = [fit_network(
@@ -312,6 +325,15 @@ def members(args, train_fp):
     return {'runs': runs}
 
 
+def _fold_network(kept_rssi, y, n_classes, config, epochs, seed):
+    """Return (scaler, net): one network trained on a fold's kept scans."""
+    import torch
+    scaler = config_scaler(config).fit(kept_rssi)
+    net, _ = fit_network(kept_rssi, torch.from_numpy(y), n_classes, scaler,
+                         config, epochs, seed, log=lambda line: None)
+    return scaler, net
+
+
 def _strongest_at(rssi, level=-30.0, floor=-110.0):
     """Return scans shifted so that their strongest reading is ``level``."""
     out = rssi + (level - np.nanmax(rssi, axis=1, keepdims=True))
@@ -321,7 +343,7 @@ def _strongest_at(rssi, level=-30.0, floor=-110.0):
 
 def ideas(args, train_fp, epochs=8, copies=8):
     """
-    Cross-validate two uses of the trained network; no test file.
+    Cross-validate other uses of the trained network; no test file.
 
     In every fold one default network (``epochs``: the default's choice
     at seed 0) scores the held-out phones three ways: its own softmax,
@@ -333,21 +355,15 @@ def ideas(args, train_fp, epochs=8, copies=8):
     """
     import torch
     from wifi_place_recognition.training.augment import ScanAugmenter
-    train_fp = train_fp.subset(~train_fp.empty_rows)
-    classes, y = class_index(train_fp.building, train_fp.floor)
+    train_fp, classes, y, per_seed = _default_folds(train_fp, args.seeds)
     runs = []
-    for seed in args.seeds:
-        config = TrainConfig(seed=seed)
-        folds = grouped_folds(train_fp, y, config.folds, config.grouping,
-                              seed)
+    for seed, config, held_out in per_seed:
         scores = {}
-        for k, held in enumerate(folds.held_out):
+        for k, held in enumerate(held_out):
             kept_rssi, held_rssi = train_fp.rssi[~held], train_fp.rssi[held]
-            scaler = config_scaler(config).fit(kept_rssi)
-            net, _ = fit_network(kept_rssi, torch.from_numpy(y[~held]),
-                                 len(classes), scaler, config, epochs,
-                                 seed + 1000 * (k + 1),
-                                 log=lambda line: None)
+            fold_seed = seed + 1000 * (k + 1)
+            scaler, net = _fold_network(kept_rssi, y[~held], len(classes),
+                                        config, epochs, fold_seed)
             with torch.no_grad():
                 x_kept = torch.from_numpy(scaler.transform(kept_rssi))
                 x_held = torch.from_numpy(scaler.transform(held_rssi))
@@ -363,15 +379,12 @@ def ideas(args, train_fp, epochs=8, copies=8):
                     tta += torch.softmax(net(torch.from_numpy(
                         scaler.transform(copy))), dim=1).numpy()
             truth = y[held]
-            kept_n, held_n = _strongest_at(kept_rssi), _strongest_at(held_rssi)
-            scaler_n = config_scaler(config).fit(kept_n)
-            net_n, _ = fit_network(kept_n, torch.from_numpy(y[~held]),
-                                   len(classes), scaler_n, config, epochs,
-                                   seed + 1000 * (k + 1),
-                                   log=lambda line: None)
+            scaler_n, net_n = _fold_network(
+                _strongest_at(kept_rssi), y[~held], len(classes), config,
+                epochs, fold_seed)
             with torch.no_grad():
-                normalised = net_n(torch.from_numpy(
-                    scaler_n.transform(held_n))).argmax(1).numpy()
+                normalised = net_n(torch.from_numpy(scaler_n.transform(
+                    _strongest_at(held_rssi)))).argmax(1).numpy()
             fold = {'network': (proba.argmax(1) == truth).mean(),
                     'network, per-scan normalised': (normalised == truth)
                     .mean(),

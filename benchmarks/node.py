@@ -46,6 +46,7 @@ VARIANTS = {
                                              'torch_node.py')],
 }
 RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+PASSES = 3      # over the scans, in-process stage profile
 
 
 def rss_mib(pid):
@@ -135,7 +136,7 @@ def measure(bench, argv, fp, scans, flood_s):
     }
 
 
-def stages(fp, passes=3):
+def stages(fp, passes):
     """
     Return {stage: (median ms, p99 ms)} of classify and its stages.
 
@@ -221,9 +222,9 @@ def main():
     for label, key in rows:
         print(f'| {label} | {base[key]:.3f} | {other[key]:.3f} | '
               f'{other[key] / base[key]:.2f} |')
-    profile = stages(fp)
+    profile = stages(fp, PASSES)
     print(f'\nin this process, shipped model, tracking on, {len(fp)} scans '
-          f'x 3')
+          f'x {PASSES}')
     print('| stage | median (ms) | p99 (ms) |')
     print('|---|---|---|')
     for key, (median, p99) in profile.items():

@@ -71,6 +71,7 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
             ('ap_column', 1, 0, 'not ascending'),
             ('ap_column', -1, len(model.ap_ids), 'not ascending'),
             ('codes', 0, 300, 'codes must be integers'),
+            ('codes', 0, 0.5, 'codes must be integers'),
             ('class_start', 1, 10**6, 'inconsistent index')):
         bad = replace(model.position)
         setattr(bad, name, getattr(bad, name).astype(np.float64))
@@ -78,3 +79,32 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
         save_model(replace(model, position=bad), tmp_path / 'bad.npz')
         with pytest.raises(ModelFileError, match=message):
             load_model(tmp_path / 'bad.npz')
+    bad = replace(model.position)
+    bad.ap_column = bad.ap_column[:, None]
+    save_model(replace(model, position=bad), tmp_path / 'bad.npz')
+    with pytest.raises(ModelFileError, match='wrong shape'):
+        load_model(tmp_path / 'bad.npz')
+
+
+def test_empty_classes_and_scans_sharing_no_ap():
+    rng = np.random.default_rng(2)
+    inputs, classes, xy = _references(rng, n_classes=2)
+    inputs[classes == 1] = 0.0          # class 1 detects nothing
+    inputs[classes == 0, -1] = 0.0      # and class 0 never the last AP
+    locator = Locator.build(inputs, classes, xy, 4, sigma=np.ones(4))
+    query = np.zeros(40)
+    query[:3] = 1.0
+    columns = np.flatnonzero(query)
+    for c in (2, 3):                    # no reference at all
+        got, sigma = locator.locate(columns, query[columns], c)
+        assert np.isnan(got).all() and np.isnan(sigma)
+    # every reference of class 1 is at the same distance: |query|
+    np.testing.assert_allclose(locator.distances(columns, query[columns], 1),
+                               np.sqrt(3.0), rtol=1e-6)
+    got, _ = locator.locate(columns, query[columns], 1)
+    assert np.isfinite(got).all()
+    # a scan sharing no AP with class 0: |query|^2 + |reference|^2
+    d = locator.distances(np.array([39]), np.ones(1), 0)
+    first = locator.class_start[0]
+    np.testing.assert_allclose(
+        d ** 2, 1.0 + locator.norms[first:first + len(d)], rtol=1e-5)

@@ -70,6 +70,11 @@ def save_model(model, path):
         header['position'] = {'origin': [float(v) for v in pos.origin],
                               'neighbours': pos.neighbours,
                               'columns': list(pos.columns), 'units': 'm'}
+    unpacked = sum(a.nbytes for a in arrays.values())
+    if unpacked > MAX_UNPACKED_BYTES:
+        raise ValueError(f'the model would unpack to {unpacked} bytes, more '
+                         f'than a model file may ({MAX_UNPACKED_BYTES}): '
+                         f'fewer reference scans or APs')
     header['sha256'] = _digest(header, arrays)
     arrays['header'] = np.frombuffer(json.dumps(header).encode(), np.uint8)
     with atomic_write(path) as f:
@@ -111,7 +116,7 @@ def _release_freed_memory():
     """
     try:
         trim = ctypes.CDLL(None).malloc_trim
-    except (OSError, AttributeError):
+    except (OSError, AttributeError, TypeError):   # not glibc, or Windows
         return
     trim(0)
 
@@ -155,7 +160,8 @@ def _read(path):
     if header.get('schema_version') != SCHEMA_VERSION:
         raise ModelFileError(f'schema version {header.get("schema_version")!r}'
                              f' is not supported (this version reads '
-                             f'{SCHEMA_VERSION})')
+                             f'{SCHEMA_VERSION}): retrain the model with '
+                             f'this version\'s train_model')
     expected = header.pop('sha256', None)
     if expected != _digest(header, arrays):
         raise ModelFileError('checksum mismatch: the file was modified or '
@@ -228,7 +234,7 @@ def _position(header, arrays, n_aps, n_classes):
                                         'ap_column'))
     n_refs, n_rows = len(a['norms']), len(a['ap_column'])
     shapes_ok = (class_start.shape == ap_start.shape == (n_classes + 1,)
-                 and a['norms'].ndim == 1
+                 and a['norms'].ndim == a['ap_column'].ndim == 1
                  and a['scale'].shape == (n_rows,) and
                  a['xy'].shape == (n_refs, 2) and
                  a['sigma'].shape == (n_classes,))

@@ -78,7 +78,8 @@ class Locator:
             block = inputs[class_start[c]:class_start[c + 1]]
             detected = np.flatnonzero((block != 0).any(axis=0))
             rows = block[:, detected].T.astype(np.float64)
-            scale = (np.abs(rows).max(axis=1) / LEVELS).astype(np.float32)
+            scale = (np.abs(rows).max(axis=1, initial=0.0) / LEVELS
+                     ).astype(np.float32)
             code = np.rint(rows / scale[:, None]).astype(np.int8)
             aps.append(detected)
             scales.append(scale)

@@ -72,7 +72,9 @@ class PlaceModel:
 
         The members' first layers are stored side by side, transposed
         (``first_t``: one row per AP, what a scan's forward pass gathers);
-        each member's first weight becomes a view into it, not a copy.
+        each member's first weight becomes a view into it, not a copy. A
+        model is not changed after it is built (its forward pass keeps
+        these arrays).
         """
         self.blank = self.scaler.blank()
         firsts = [layers[0] for layers in self.members]

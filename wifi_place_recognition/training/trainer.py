@@ -6,8 +6,9 @@ reconstruction; the decoder is dropped, a classifier (softmax over every
 building/floor class seen) is put on top and the whole network fine-tuned
 with cross-entropy and Adam. How many epochs is chosen by grouped K-fold
 cross-validation (:mod:`.selection`): one curve of held-out building+floor
-accuracy per fold, the epoch count where their mean peaks. Then the
-ensemble's members are trained on all scans for that many epochs.
+accuracy per fold, the epoch count where their mean peaks; or by the curve
+of a separate validation set. Then the ensemble's members are trained on
+all scans for that many epochs.
 """
 
 import contextlib
@@ -34,7 +35,7 @@ class TrainReport:
     """What happened during training, for the summary and provenance."""
 
     epochs: int = 0               # fine-tuning epochs of the members
-    selection: dict = field(default_factory=dict)  # cross-validation
+    selection: dict = field(default_factory=dict)  # folds or validation
     train_samples: int = 0
     dropped_empty: int = 0
     seconds: float = 0.0
@@ -242,7 +243,9 @@ def validate(fp, y, classes, validation, config, log=print):
                 validation.floor[held_y < 0][0])
         raise ValueError(f'validation data {validation.source}: building '
                          f'{b} floor {f} ({int((held_y < 0).sum())} scans) '
-                         f'is not in the training data')
+                         f'is not in the training data (if --small-classes '
+                         f'drop left it out, leave it out of the '
+                         f'validation data too)')
     if not usable.any():
         raise ValueError(f'validation data {validation.source}: no scan '
                          f'detects an AP of the training data')
@@ -382,8 +385,9 @@ def train(fp, config, log=print, validation=None):
         report.epochs = report.selection['epochs']
         s = report.selection
         log(f'held-out building+floor {s["accuracy_mean"]:.4f} '
-            f'({s["accuracy_min"]:.4f}-{s["accuracy_max"]:.4f} over folds) '
-            f'at {report.epochs} epochs')
+            + (f'({s["accuracy_min"]:.4f}-{s["accuracy_max"]:.4f} over '
+               f'folds) ' if len(s['folds']) > 1 else '')
+            + f'at {report.epochs} epochs')
     scaler = config_scaler(config).fit(fp.rssi)
     nets = []
     for k in range(config.ensemble):
