@@ -119,11 +119,10 @@ class ScanMapper:
         if not known.any():
             raise ScanRejected('no_known_ap', f'none of the {len(names)} APs '
                                f'is known to the model')
-        values = values[known]
-        order = np.lexsort((-values, cols[known]))  # by column, strongest 1st
-        cols = cols[known][order]
+        order = np.lexsort((-values[known], cols[known]))  # strongest first
+        cols, values = cols[known][order], values[known][order]
         first = np.empty(len(cols), bool)  # an AP read twice: its strongest
         first[0] = True
         np.not_equal(cols[1:], cols[:-1], out=first[1:])
-        return MappedScan(cols[first], values[order][first],
-                          int(first.sum()), int((~known).sum()), clipped)
+        return MappedScan(cols[first], values[first], int(first.sum()),
+                          int((~known).sum()), clipped)

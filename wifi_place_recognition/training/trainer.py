@@ -309,9 +309,11 @@ def _cross_validate_position(splits, runs, n_classes, config, log):
     predicted = []
     for split, (scaler, classes) in zip(splits, runs):
         locator = _locator(split.kept, split.y, n_classes, scaler)
-        rows = list(_sparse_inputs(split.held_rssi, scaler))
-        distances = [locator.distances(columns, inputs, c)
-                     for (columns, inputs), c in zip(rows, classes)]
+        inputs = _relative(split.held_rssi, scaler)
+        distances = []
+        for rssi, x, c in zip(split.held_rssi, inputs, classes):
+            columns = np.flatnonzero(~np.isnan(rssi))
+            distances.append(locator.distances(columns, x[columns], c))
         for k in candidates:
             xy = np.array([locator.weighted(d, k, c)[0]
                            for d, c in zip(distances, classes)])
@@ -332,22 +334,15 @@ def _cross_validate_position(splits, runs, n_classes, config, log):
                 n_classes).tolist()}
 
 
-def _sparse_inputs(rssi, scaler):
-    """Yield (columns, inputs relative to an empty scan) of each scan."""
-    blank = scaler.blank()
-    for row in rssi:
-        columns = np.flatnonzero(~np.isnan(row))
-        yield columns, scaler.transform(row[columns], columns) - \
-            blank[columns]
+def _relative(rssi, scaler):
+    """Return inputs relative to an empty scan: 0 where nothing detected."""
+    return scaler.transform(rssi) - scaler.blank()
 
 
 def _locator(fp, y, n_classes, scaler, neighbours=5, sigma=None):
     """Return a :class:`Locator` of the scans of ``fp`` (class ``y``)."""
-    dense = np.zeros(fp.rssi.shape, np.float32)
-    for i, (columns, inputs) in enumerate(_sparse_inputs(fp.rssi, scaler)):
-        dense[i, columns] = inputs
-    return Locator.build(dense, y, fp.position, n_classes, neighbours,
-                         sigma, fp.position_columns)
+    return Locator.build(_relative(fp.rssi, scaler), y, fp.position,
+                         n_classes, neighbours, sigma, fp.position_columns)
 
 
 def config_scaler(config):
