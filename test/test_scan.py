@@ -3,12 +3,21 @@
 import numpy as np
 import pytest
 from wifi_place_recognition.core.artifact import load_model, save_model
+from wifi_place_recognition.core.model import mean_softmax
 from wifi_place_recognition.core.preprocessing import RssiScaler
 from wifi_place_recognition.core.recognizer import OK, PlaceRecognizer, WARN
 from wifi_place_recognition.core.scan import (
     normalize_ap_id, ScanMapper, ScanRejected)
 from wifi_place_recognition.training.augment import ScanAugmenter
 from wifi_place_recognition.training.config import TrainConfig
+
+
+def test_mean_softmax_averages_the_members_probabilities():
+    logits = np.array([[[1.0, 2.0, 3.0]], [[0.0, 0.0, 1000.0]]])  # 2 x 1 scan
+    first = np.exp([1.0, 2.0, 3.0]) / np.exp([1.0, 2.0, 3.0]).sum()
+    expected = (first + [0.0, 0.0, 1.0]) / 2    # no overflow at 1000
+    np.testing.assert_allclose(mean_softmax(logits), [expected])
+    np.testing.assert_allclose(mean_softmax(logits).sum(), 1.0)
 
 
 @pytest.mark.parametrize('given, expected', [

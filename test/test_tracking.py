@@ -8,8 +8,8 @@ import pytest
 from wifi_place_recognition.core.artifact import (
     load_model, ModelFileError, save_model)
 from wifi_place_recognition.core.tracking import (
-    fit_evidence, fit_motion, fit_rates, PlaceTracker, split_walks,
-    track_walk, TrackingParams)
+    fit_evidence, fit_motion, fit_rates, PlaceTracker, PositionFilter,
+    split_walks, track_walk, TrackingParams)
 
 #: Two buildings: building 0 has floors 0-2, building 1 floors 0-1.
 CLASSES = np.array([[0, 0], [0, 1], [0, 2], [1, 0], [1, 1]])
@@ -101,6 +101,35 @@ def test_bad_evidence_is_refused():
         tracker.update(0.0, np.full(5, np.nan))
     with pytest.raises(ValueError, match='position'):
         tracker.update(0.0, scan(0), xy=[1.0, 2.0])
+
+
+def test_position_filter_is_the_constant_velocity_kalman_filter():
+    params = TrackingParams(acceleration_noise=0.3, speed_sd=0.7)
+    track = PositionFilter(params)
+    rng = np.random.default_rng(3)
+    eye, x = np.eye(2), None
+    for _ in range(40):
+        z, s = rng.normal(0, 10, 2), rng.uniform(1, 5)
+        noise = np.array([[s * s, 0.4], [0.4, 1.3 * s * s]])
+        if x is None:       # a track starts at rest
+            x = np.r_[z, 0.0, 0.0]
+            cov = np.diag([0.0, 0.0, 0.49, 0.49])
+            cov[:2, :2] = noise
+        else:               # textbook matrices: F P F^T + Q, then the gain
+            dt = rng.uniform(0.5, 20)
+            move = np.eye(4) + dt * np.eye(4, k=2)
+            q = params.acceleration_noise * np.block(
+                [[dt ** 3 / 3 * eye, dt ** 2 / 2 * eye],
+                 [dt ** 2 / 2 * eye, dt * eye]])
+            x, cov = move @ x, move @ cov @ move.T + q
+            track.predict(dt)
+            gain = cov[:, :2] @ np.linalg.inv(cov[:2, :2] + noise)
+            x, cov = x + gain @ (z - x[:2]), cov - gain @ cov[:2]
+        track.update(z, noise)
+        xy, xy_cov = track.xy
+        np.testing.assert_allclose(xy, x[:2], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(xy_cov, cov[:2, :2], rtol=1e-9,
+                                   atol=1e-9)
 
 
 def test_position_is_smoothed_and_restarts_on_a_floor_change():
