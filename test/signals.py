@@ -82,7 +82,7 @@ def _command(kind, folder):
     iw.write_text(f'#!/bin/sh\nsleep 0.05\ncat "{FIXTURES / "iw_scan.txt"}"\n')
     iw.chmod(0o755)
     env['PATH'] = f'{tools}{os.pathsep}{env.get("PATH", "")}'
-    return [exe, '--ros-args', '-p', 'interface:=wlan0',
+    return [exe, '--ros-args', '-p', 'interface:=lo',
             '-p', 'period:=0.1'], env
 
 

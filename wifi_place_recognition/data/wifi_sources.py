@@ -31,10 +31,13 @@ from typing import NamedTuple, Optional
 
 from ..core.rssi import plausible
 
+SYS_CLASS_NET = '/sys/class/net'
 MAC = re.compile(r'^[0-9a-f]{2}(:[0-9a-f]{2}){5}$')
 IW_SIGNAL = re.compile(r'^signal: (-?\d+(?:\.\d+)?) dBm$')
 IW_AGE = re.compile(r'^last seen: (\d+) ms ago$')
 IW_BOOTTIME = re.compile(r'^last seen: \d+\.\d+s \[boottime\]$')
+#: FREQ begins with its number (the unit may be translated).
+NM_FREQ = re.compile(r'^\d+')
 NM_BEST_DBM = -40.0
 NM_DB_PER_PERCENT = 0.6
 
@@ -109,12 +112,14 @@ def parse_nmcli(text):
     Return the readings in ``nmcli -t -f BSSID,SIGNAL,FREQ ...`` output.
 
     In terse output ``:`` inside a field is escaped as ``\:``. Lines with a
-    bad BSSID or a SIGNAL that is not a percentage are skipped.
+    bad BSSID, a SIGNAL that is not a percentage, or no FREQ (a listing cut
+    inside its last line: ``...:92:2412 MHz`` cut to ``...:9``) are skipped:
+    only the FREQ field shows that SIGNAL is complete.
     """
     readings = []
     for line in text.splitlines():
         fields = re.split(r'(?<!\\):', line.strip())
-        if len(fields) < 2:
+        if len(fields) != 3 or not NM_FREQ.match(fields[2]):
             continue
         bssid = _mac(fields[0].replace('\\:', ':'))
         try:
@@ -141,13 +146,31 @@ SOURCES = {
 }
 
 
-def wireless_interfaces(sys_class_net='/sys/class/net'):
-    """Return the names of the wireless interfaces, sorted."""
+def network_interfaces(sys_class_net=SYS_CLASS_NET):
+    """Return the names of all network interfaces, sorted."""
     root = Path(sys_class_net)
     if not root.is_dir():
         return []
-    return sorted(p.name for p in root.iterdir()
-                  if (p / 'wireless').exists() or (p / 'phy80211').exists())
+    return sorted(p.name for p in root.iterdir())
+
+
+def wireless_interfaces(sys_class_net=SYS_CLASS_NET):
+    """Return the names of the wireless interfaces, sorted."""
+    root = Path(sys_class_net)
+    return [name for name in network_interfaces(root)
+            if (root / name / 'wireless').exists() or
+            (root / name / 'phy80211').exists()]
+
+
+def interface_problem(name, sys_class_net=SYS_CLASS_NET):
+    """Return why interface ``name`` cannot be scanned (it is missing), or None."""
+    present = network_interfaces(sys_class_net)
+    if name in present:
+        return None
+    wireless = wireless_interfaces(sys_class_net)
+    return (f'interface {name!r} does not exist; {sys_class_net} has '
+            f'{", ".join(present) or "none"} (wireless: '
+            f'{", ".join(wireless) or "none"})')
 
 
 class SourceRunner:

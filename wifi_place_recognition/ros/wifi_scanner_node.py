@@ -8,8 +8,10 @@ kernel's cached results, ``nmcli`` asks NetworkManager; see
 publishes a ``sensor_msgs/JointState`` (name = BSSID, position = RSSI dBm,
 frame_id = interface). The scan commands run off the executor, so
 parameters and the 1 Hz status on ``/diagnostics`` stay responsive while a
-command hangs (up to its timeout). No interface, no permission or a missing
-tool gives an ERROR status with the reason; it keeps retrying.
+command hangs (up to its timeout). An ``interface`` missing from
+``/sys/class/net`` stops the start-up (exit 1, naming the interfaces there);
+no wireless interface (``interface`` empty), no permission or a missing tool
+gives an ERROR status with the reason, and it keeps retrying.
 """
 
 from collections import Counter
@@ -23,8 +25,9 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
-from ..data.wifi_sources import (drop_stale, SOURCES, SourceError,
-                                 SourceRunner, wireless_interfaces)
+from ..data.wifi_sources import (drop_stale, interface_problem, SOURCES,
+                                 SourceError, SourceRunner,
+                                 wireless_interfaces)
 from .runner import names_the_node, run
 
 THROTTLE_S = 30.0
@@ -57,6 +60,9 @@ class WifiScannerNode(Node):
                             'time',
                 floating_point_range=[FloatingPointRange(
                     from_value=0.0, to_value=3600.0)])).value
+        problem = self.interface and interface_problem(self.interface)
+        if problem:
+            raise ValueError(problem)
         unknown = [s for s in self.sources if s not in SOURCES]
         if unknown or not self.sources:
             raise ValueError(f'unknown scan sources {unknown}; use any of '
