@@ -57,10 +57,11 @@ from wifi_place_recognition.data.fingerprints import (  # noqa: E402
     read_fingerprints, ReaderOptions)
 from wifi_place_recognition.training.config import (  # noqa: E402
     PAPER, TrainConfig)
+from wifi_place_recognition.training.fitting import (  # noqa: E402
+    best_epoch, config_scaler, fit_network)
+from wifi_place_recognition.training.folds import grouped_folds  # noqa: E402
 from wifi_place_recognition.training.selection import (  # noqa: E402
-    grouped_folds)
-from wifi_place_recognition.training.trainer import (  # noqa: E402
-    best_epoch, config_scaler, cross_validate, fit_network)
+    cross_validate)
 
 WIFINE_OPTIONS = dict(floor_column='floorID', building_column=None,
                       not_detected_marker=-100.0,

@@ -16,8 +16,9 @@ from wifi_place_recognition.core.locator import R95
 from wifi_place_recognition.core.model import mean_softmax, ScanForward
 from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.training.config import TrainConfig
-from wifi_place_recognition.training.selection import grouped_folds
-from wifi_place_recognition.training.trainer import best_epoch, train
+from wifi_place_recognition.training.folds import grouped_folds
+from wifi_place_recognition.training.fitting import best_epoch
+from wifi_place_recognition.training.trainer import train
 
 SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
              epochs=15, batch_size=32, ensemble=1)
@@ -253,7 +254,7 @@ def test_position_by_neighbours_round_trips_the_model_file(tmp_path):
     assert loaded.position.neighbours == report.selection['neighbours']
     np.testing.assert_array_equal(loaded.position.origin,
                                   fp.position.mean(axis=0))
-    proba, xy, sigma = loaded.locate(test.rssi)
+    proba, xy, sigma = loaded.predict_positions(test.rssi)
     error = np.linalg.norm(xy - test.position, axis=1)
     # scans spread over 40 m x 40 m floors: guessing the middle is ~15 m off
     assert error.mean() < 4.0, error.mean()
@@ -274,7 +275,7 @@ def test_a_classifier_only_model_refuses_to_locate(synthetic):
     model = load_model(synthetic[1])
     assert model.position is None
     with pytest.raises(ValueError, match='no position output'):
-        model.locate(np.full((1, len(model.ap_ids)), -60.0))
+        model.predict_positions(np.full((1, len(model.ap_ids)), -60.0))
 
 
 def test_evaluate_model_reports_position_errors_and_draws(tmp_path):
