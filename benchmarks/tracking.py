@@ -43,8 +43,9 @@ from wifi_place_recognition.core.artifact import (  # noqa: E402
 from wifi_place_recognition.core.atomic import atomic_write  # noqa: E402
 from wifi_place_recognition.core.evaluation import align  # noqa: E402
 from wifi_place_recognition.core.tracking import (  # noqa: E402
-    DEFAULT_TIMEOUT, fit_evidence, fit_motion, fit_rates, PlaceTracker,
-    track_walk, TrackingParams)
+    DEFAULT_TIMEOUT, PlaceTracker, track_walk, TrackingParams)
+from wifi_place_recognition.core.tracking_fit import (  # noqa: E402
+    fit_evidence, fit_motion, fit_rates)
 from wifi_place_recognition.cli.common import (  # noqa: E402
     add_data_arguments, read_data)
 from wifi_place_recognition.data.walks import walk_name, walks  # noqa: E402

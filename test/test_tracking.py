@@ -8,8 +8,10 @@ import pytest
 from wifi_place_recognition.core.artifact import (
     load_model, ModelFileError, save_model)
 from wifi_place_recognition.core.tracking import (
-    fit_evidence, fit_motion, fit_rates, PlaceTracker, PositionFilter,
-    split_walks, track_walk, TrackingParams)
+    PlaceTracker, PositionFilter, track_walk, TrackingParams)
+from wifi_place_recognition.core.tracking_fit import (
+    fit_evidence, fit_motion, fit_rates)
+from wifi_place_recognition.data.walks import split_walks
 
 #: Two buildings: building 0 has floors 0-2, building 1 floors 0-1.
 CLASSES = np.array([[0, 0], [0, 1], [0, 2], [1, 0], [1, 1]])

@@ -8,7 +8,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from ..data.predictions import write_predictions
-from ..ros.replayer import replay, summarise
+from ..ros.replayer import replay, ReplayOptions, summarise
 from .common import (add_data_arguments, add_download_arguments, main_wrapper,
                      read_data)
 
@@ -55,13 +55,17 @@ def main(argv=None):
     args, ros_args = p.parse_known_args(argv)
     if args.realtime < 0 or (args.realtime and args.rate):
         p.error('--realtime FACTOR must be > 0, and not with --rate')
+    options = ReplayOptions(
+        place_topic=args.place_topic, wait=args.wait, rate=args.rate,
+        realtime=args.realtime, max_wait=args.max_wait, limit=args.limit,
+        timeout=args.timeout, retries=args.retries, progress=args.progress)
     fp = read_data(args.data, args, 'data', role='test')
     if args.realtime and 'TIMESTAMP' not in fp.meta:
         p.error(f'--realtime: {fp.source} has no TIMESTAMP column')
     rclpy.init(args=ros_args)
     node = rclpy.create_node('scan_replayer')
     try:
-        rows, answers = replay(node, fp, args,
+        rows, answers = replay(node, fp, options,
                                lambda s: print(s, file=sys.stderr,
                                                flush=True))
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -24,21 +24,19 @@ uncertainty grows with the time since the last scan; a new track starts at
 rest with a speed uncertainty of ``speed_sd`` m/s). It restarts whenever
 the tracked class changes.
 
-:func:`fit_rates`, :func:`fit_evidence` and :func:`fit_motion` choose the
-parameters on training walks; :class:`TrackingParams` is what a model file
-stores. The defaults are those chosen on WiFine's ``val/`` walks with the
-default recipe's WiFine model (``benchmarks/tracking.py fit``; one
-building: its building rate is a choice, 1/200 of the floor rate).
+:class:`TrackingParams` is what a model file stores; :mod:`.tracking_fit`
+chooses them on recorded walks (``fit_tracking``). The defaults are those
+chosen on WiFine's ``val/`` walks with the default recipe's WiFine model
+(one building: its building rate is a choice, 1/200 of the floor rate).
 """
 
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, fields
 import math
 
 import numpy as np
 
 #: Smallest class probability used as evidence (a softmax can underflow).
 MIN_PROBABILITY = 1e-12
-LOG_FLOOR = math.log(1e-6)
 #: Seconds without a scan after which the belief restarts.
 DEFAULT_TIMEOUT = 600.0
 
@@ -281,24 +279,6 @@ class PlaceTracker:
         return track
 
 
-# walks ---------------------------------------------------------------------
-def split_walks(keys, times):
-    """
-    Return index arrays of walks: scans grouped by ``keys``, in time order.
-
-    ``keys`` is a sequence of (n,) arrays (e.g. USERID and PHONEID);
-    scans with equal keys form one walk, sorted by ``times`` (stable).
-    """
-    times = np.asarray(times, np.float64)
-    order = np.lexsort((times,) + tuple(np.asarray(k) for k in
-                                        reversed(keys)))
-    new = np.zeros(max(len(order) - 1, 0), bool)
-    for key in keys:
-        key = np.asarray(key)[order]
-        new |= key[1:] != key[:-1]
-    return np.split(order, np.flatnonzero(new) + 1)
-
-
 def track_walk(tracker, times, proba, xy=None, cov=None):
     """
     Run ``tracker`` (reset first) over one walk; return its tracks.
@@ -311,163 +291,3 @@ def track_walk(tracker, times, proba, xy=None, cov=None):
                            None if xy is None else xy[i],
                            None if cov is None else cov[i])
             for i in range(len(times))]
-
-
-# fitting -------------------------------------------------------------------
-def _rate_mle(dt, changed):
-    """
-    Return the rate of ``P(change in dt) = 1 - exp(-rate dt)`` (MLE).
-
-    With no change at all, half a change over the total time is assumed
-    (a change is possible, just rarer than the data can show).
-    """
-    dt = np.asarray(dt, np.float64)
-    changed = np.asarray(changed, bool)
-    total = dt.sum()
-    if total <= 0:
-        raise ValueError('walks span no time: cannot fit change rates')
-    if not changed.any():
-        return 0.5 / total
-    if changed.all():
-        raise ValueError('every consecutive pair of scans changes place: '
-                         'cannot fit change rates')
-    d_change, stay = dt[changed], dt[~changed].sum()
-
-    def slope(rate):    # derivative of the log-likelihood, decreasing
-        x = rate * d_change
-        return float(np.sum(d_change / np.expm1(np.maximum(x, 1e-300)))
-                     - stay)
-    low, high = 1e-12, 1e3
-    for _ in range(200):
-        mid = math.sqrt(low * high)
-        if slope(mid) > 0:
-            low = mid
-        else:
-            high = mid
-    return math.sqrt(low * high)
-
-
-def fit_rates(walks, timeout=DEFAULT_TIMEOUT):
-    """
-    Fit ``floor_rate`` and ``building_rate`` on labelled walks.
-
-    ``walks`` is an iterable of (times, building, floor) arrays in time
-    order. Consecutive pairs further apart than ``timeout`` are left out
-    (the tracker restarts there). Return (floor_rate, building_rate,
-    summary dict).
-    """
-    dts, building_changed, floor_changed = [], [], []
-    for times, building, floor in walks:
-        dt = np.diff(np.asarray(times, np.float64))
-        keep = (dt >= 0) & (dt <= timeout)
-        b = np.diff(np.asarray(building)) != 0
-        f = np.diff(np.asarray(floor)) != 0
-        dts.append(dt[keep])
-        building_changed.append(b[keep])
-        floor_changed.append((f & ~b)[keep])
-    dt = np.concatenate(dts)
-    b = np.concatenate(building_changed)
-    f = np.concatenate(floor_changed)
-    building_rate = _rate_mle(dt, b)
-    floor_rate = _rate_mle(dt[~b], f[~b])
-    summary = {'pairs': int(len(dt)),
-               'hours': round(float(dt.sum()) / 3600, 3),
-               'floor_changes': int(f.sum()),
-               'building_changes': int(b.sum())}
-    return floor_rate, building_rate, summary
-
-
-def filtered_scores(params, classes, walks):
-    """
-    Return (mean log belief of the true class, accuracy) of tracked walks.
-
-    ``walks`` is a list of (times, true class index, proba) in time order.
-    """
-    tracker = PlaceTracker(classes, params)
-    log_sum, right, n = 0.0, 0, 0
-    for times, truth, proba in walks:
-        for track, t in zip(track_walk(tracker, times, proba), truth):
-            log_sum += max(math.log(max(track.belief[t], 1e-300)),
-                           LOG_FLOOR)
-            right += track.index == t
-            n += 1
-    return log_sum / n, right / n
-
-
-def fit_evidence(params, classes, walks,
-                 temperatures=(1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0),
-                 min_intervals=(0.0, 5.0, 20.0, 60.0, 200.0)):
-    """
-    Choose ``temperature`` and ``min_interval`` on walks (grid search).
-
-    ``walks`` as for :func:`filtered_scores`, with probabilities from a
-    model that did not train on them. The choice is the best tracked
-    accuracy (the answer the node publishes), ties broken by the mean log
-    belief of the true class (a proper score: it rewards a belief that is
-    right and confident, and punishes one that is confidently wrong).
-    Return (params with the choice, grid as a list of dicts).
-    """
-    grid = []
-    for temperature in temperatures:
-        for min_interval in min_intervals:
-            candidate = replace(params, temperature=temperature,
-                                min_interval=min_interval)
-            score, accuracy = filtered_scores(candidate, classes, walks)
-            grid.append({'temperature': temperature,
-                         'min_interval': min_interval,
-                         'accuracy': round(accuracy, 6),
-                         'mean_log_belief': round(score, 6)})
-    best = max(grid, key=lambda g: (g['accuracy'], g['mean_log_belief']))
-    return replace(params, temperature=best['temperature'],
-                   min_interval=best['min_interval']), grid
-
-
-def _tracked_position_error(params, walks, timeout):
-    """Return the mean error (m) of the filtered positions of ``walks``."""
-    track = PositionFilter(params)
-    total, n = 0.0, 0
-    for times, xy, cov, truth in walks:
-        track.reset()
-        last = None
-        for t, z, c, true in zip(times, xy, cov, truth):
-            if last is not None and 0 <= t - last <= timeout:
-                track.predict(t - last)
-            else:
-                track.reset()
-            track.update(z, c)
-            total += math.hypot(track.state[0] - true[0],
-                                track.state[1] - true[1])
-            n += 1
-            last = t
-    return total / n
-
-
-def fit_motion(params, walks, timeout=DEFAULT_TIMEOUT,
-               accelerations=(0.001, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0)):
-    """
-    Choose ``speed_sd`` and ``acceleration_noise`` on walks with positions.
-
-    ``walks``: list of (times, predicted xy (n, 2), their cov (n, 2, 2),
-    true xy (n, 2)), predictions from a model that did not train on them.
-    ``speed_sd`` is the root mean square true speed per axis between
-    consecutive scans; ``acceleration_noise`` the grid value whose filtered
-    positions have the smallest mean error (single-scan position errors of
-    neighbouring scans are alike, so the motion model that describes the
-    true walk best is not the one that filters best). Return (params with
-    the choice, grid as a list of dicts).
-    """
-    speeds = []
-    for times, _, _, truth in walks:
-        dt = np.diff(np.asarray(times, np.float64))
-        keep = dt > 0
-        speeds.append((np.diff(np.asarray(truth, np.float64), axis=0)[keep]
-                       / dt[keep, None]).ravel())
-    speeds = np.concatenate(speeds) if speeds else np.empty(0)
-    if not len(speeds):
-        raise ValueError('no consecutive scans with positions')
-    base = replace(params, speed_sd=float(np.sqrt(np.mean(speeds ** 2))))
-    grid = [{'acceleration_noise': a, 'mean_error_m': round(
-        _tracked_position_error(replace(base, acceleration_noise=a), walks,
-                                timeout), 4)} for a in accelerations]
-    best = min(grid, key=lambda g: g['mean_error_m'])
-    return replace(base, acceleration_noise=best['acceleration_noise']), grid

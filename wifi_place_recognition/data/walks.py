@@ -2,10 +2,25 @@
 
 import numpy as np
 
-from ..core.tracking import split_walks
-
 #: Metadata columns that tell walks apart when the scans come from one file.
 WALK_KEYS = ('USERID', 'PHONEID')
+
+
+def split_walks(keys, times):
+    """
+    Return index arrays of walks: scans grouped by ``keys``, in time order.
+
+    ``keys`` is a sequence of (n,) arrays (e.g. USERID and PHONEID);
+    scans with equal keys form one walk, sorted by ``times`` (stable).
+    """
+    times = np.asarray(times, np.float64)
+    order = np.lexsort((times,) + tuple(np.asarray(k) for k in
+                                        reversed(keys)))
+    new = np.zeros(max(len(order) - 1, 0), bool)
+    for key in keys:
+        key = np.asarray(key)[order]
+        new |= key[1:] != key[:-1]
+    return np.split(order, np.flatnonzero(new) + 1)
 
 
 def walks(fp):

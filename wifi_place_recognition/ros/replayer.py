@@ -12,6 +12,7 @@ end the number of answered scans and the accuracy against the CSV labels
 are summarised.
 """
 
+from dataclasses import dataclass
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -24,6 +25,26 @@ from sensor_msgs.msg import JointState
 from ..core.metrics import accuracies
 from ..data.walks import walks
 from .messages import scan_message, status_values
+
+
+@dataclass(frozen=True)
+class ReplayOptions:
+    """How :func:`replay` sends the scans (``replay_scans``' options)."""
+
+    place_topic: str = '/classifier_node/place'
+    wait: float = 15.0        # s for the node to appear
+    rate: float = 0.0         # scans per second; 0: lockstep
+    realtime: float = 0.0     # > 0: each walk at its pace times this
+    max_wait: float = 10.0    # s between two scans at most (realtime)
+    limit: int = None         # send at most this many scans
+    timeout: float = 1.0      # s to wait for an answer
+    retries: int = 2          # lockstep: resend an unanswered scan
+    progress: int = 100       # log every this many scans
+
+    def __post_init__(self):
+        """Refuse options that contradict each other."""
+        if self.realtime < 0 or (self.realtime and self.rate):
+            raise ValueError('realtime must be >= 0, and not with a rate')
 
 
 class Replayer:
@@ -88,20 +109,24 @@ def unique_stamps(seconds):
     return stamps
 
 
-def replay(node, fp, args, log):
-    """Publish the rows of ``fp``; return (rows sent, {row: status})."""
-    replayer = Replayer(node, args.place_topic)
-    if not replayer.wait_for_node(args.wait):
-        raise RuntimeError(f'no classifier node answered within {args.wait} '
+def replay(node, fp, options, log):
+    """
+    Publish the rows of ``fp`` as :class:`ReplayOptions` say.
+
+    Return (rows sent, {row: status}).
+    """
+    replayer = Replayer(node, options.place_topic)
+    if not replayer.wait_for_node(options.wait):
+        raise RuntimeError(f'no classifier node answered within {options.wait} '
                            f's (is it running, on the same ROS_DOMAIN_ID, '
-                           f'publishing {args.place_topic}?)')
+                           f'publishing {options.place_topic}?)')
     times = fp.meta.get('TIMESTAMP')
-    order = np.concatenate(walks(fp)) if args.realtime else \
+    order = np.concatenate(walks(fp)) if options.realtime else \
         np.arange(len(fp))
-    n = len(fp) if args.limit is None else min(args.limit, len(fp))
+    n = len(fp) if options.limit is None else min(options.limit, len(fp))
     order = order[:n]
     stamps = None if times is None else unique_stamps(times[order])
-    period = 1.0 / args.rate if args.rate > 0 else 0.0
+    period = 1.0 / options.rate if options.rate > 0 else 0.0
     next_time = time.monotonic()
     for i, row in enumerate(order):
         stamp = node.get_clock().now().to_msg() if stamps is None \
@@ -113,21 +138,21 @@ def replay(node, fp, args, log):
             next_time += period
             replayer.spin_until(lambda: False, next_time)
         else:  # lockstep: wait for this answer before the next scan
-            for attempt in range(1 + args.retries):
+            for attempt in range(1 + options.retries):
                 if attempt:
                     replayer.publish(row, msg)
                 if replayer.spin_until(lambda: row in replayer.answers,
-                                       time.monotonic() + args.timeout):
+                                       time.monotonic() + options.timeout):
                     break
-        if args.realtime and i + 1 < n:  # and the recorded gap, capped
-            gap = (times[order[i + 1]] - times[row]) / args.realtime
+        if options.realtime and i + 1 < n:  # and the recorded gap, capped
+            gap = (times[order[i + 1]] - times[row]) / options.realtime
             replayer.spin_until(lambda: False, sent_at + min(
-                max(gap, 0.0), args.max_wait))   # (< 0: the next walk)
-        if (i + 1) % args.progress == 0 or i + 1 == n:
+                max(gap, 0.0), options.max_wait))   # (< 0: the next walk)
+        if (i + 1) % options.progress == 0 or i + 1 == n:
             log(f'{i + 1}/{n} scans sent, {len(replayer.answers)} '
                 f'answered')
     replayer.spin_until(lambda: len(replayer.answers) >= n,
-                        time.monotonic() + args.timeout)
+                        time.monotonic() + options.timeout)
     return order, replayer.answers
 
 
