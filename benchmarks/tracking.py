@@ -80,7 +80,8 @@ def positions(model, fp, usable):
         return None, None
     xy = np.full((len(fp), 2), np.nan)
     sigma = np.full(len(fp), np.nan)
-    _, xy[usable], sigma[usable] = model.locate(align(model, fp)[usable])
+    _, xy[usable], sigma[usable] = model.predict_positions(
+        align(model, fp)[usable])
     return xy, sigma[:, None, None] ** 2 * np.eye(2)
 
 

@@ -36,7 +36,7 @@ def evaluate(model, fp):
         proba = model.predict_proba(rssi)
         xy, sigma = np.full((len(fp), 2), np.nan), np.full(len(fp), np.nan)
     else:
-        proba, xy, sigma = model.locate(rssi)
+        proba, xy, sigma = model.predict_positions(rssi)
     best = proba.argmax(axis=1)
     building, floor = model.classes[best, 0], model.classes[best, 1]
     result = accuracies(fp.building, fp.floor, building, floor)

@@ -4,7 +4,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .locator import Locator
 from .preprocessing import RssiScaler
+from .tracking import TrackingParams
 
 
 def _relu(x):
@@ -61,8 +63,8 @@ class PlaceModel:
     members: list
     classes: np.ndarray           # int64 (k, 2): building, floor per output
     provenance: dict = field(default_factory=dict)
-    tracking: object = None       # TrackingParams from the file, or None
-    position: object = None       # a Locator; None: a classifier only
+    tracking: TrackingParams = None  # from the file, or None
+    position: Locator = None      # None: a classifier only
     blank: np.ndarray = field(init=False, repr=False)
     first_t: np.ndarray = field(init=False, repr=False)
 
@@ -120,9 +122,11 @@ class PlaceModel:
         """
         return self.scaler.transform(rssi, columns) - self.blank[columns]
 
-    def locate(self, rssi):
+    def predict_positions(self, rssi):
         """
         Return (class probabilities, xy metres (n, 2), sigma metres (n,)).
+
+        The batch form of what :class:`Locator` does for one scan.
 
         Raises ValueError for a model without a position output.
         """
