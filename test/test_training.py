@@ -16,8 +16,9 @@ from wifi_place_recognition.core.locator import R95
 from wifi_place_recognition.core.model import mean_softmax, ScanForward
 from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.training.config import TrainConfig
-from wifi_place_recognition.training.selection import grouped_folds
-from wifi_place_recognition.training.trainer import best_epoch, train
+from wifi_place_recognition.training.folds import grouped_folds
+from wifi_place_recognition.training.fitting import best_epoch
+from wifi_place_recognition.training.trainer import train
 
 SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
              epochs=15, batch_size=32, ensemble=1)
