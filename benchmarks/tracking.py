@@ -47,7 +47,7 @@ from wifi_place_recognition.core.tracking import (  # noqa: E402
 from wifi_place_recognition.core.tracking_fit import (  # noqa: E402
     fit_evidence, fit_motion, fit_rates)
 from wifi_place_recognition.cli.common import (  # noqa: E402
-    add_data_arguments, read_data)
+    add_data_arguments, data_options, read_data)
 from wifi_place_recognition.data.walks import walk_name, walks  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / 'results'
@@ -121,7 +121,7 @@ def cross_fit_probabilities(model, fp, folds, options, log):
 def fit(args):
     """Choose the tracking parameters on training walks; write them."""
     model = load_model(args.model)
-    fp = read_data(args.walks, args, 'training walks')
+    fp = read_data(args.walks, data_options(args), 'training walks')
     walk_list = walks(fp)
     times = fp.meta['TIMESTAMP']
     floor_rate, building_rate, rates = fit_rates(
@@ -273,7 +273,8 @@ def evaluate_walks(model, fp, params):
 def run(args):
     """Evaluate tracked against single-scan answers on test walks."""
     model = load_model(args.model)
-    fp = read_data(args.data, args, 'test walks', role='test')
+    fp = read_data(args.data, data_options(args), 'test walks',
+                   role='test')
     params = model.tracking or TrackingParams()
     rows = evaluate_walks(model, fp, params)
     summary = _summary(rows)

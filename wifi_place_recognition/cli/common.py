@@ -1,5 +1,6 @@
 """Pieces shared by the command-line tools: data arguments and error exits."""
 
+from dataclasses import dataclass, field, replace
 import functools
 import os
 import sys
@@ -82,27 +83,55 @@ def add_data_arguments(parser, training=False):
                             'them, or keep them as intended')
 
 
-def read_data(given, args, what, role='train', small_classes=None):
+@dataclass(frozen=True)
+class DataOptions:
+    """
+    What the command line says about the data: how to read it, where from.
+
+    ``download``: with no path given, read the UCI zip, fetched once into
+    ``cache_dir``.
+    """
+
+    reader: ReaderOptions = field(default_factory=ReaderOptions)
+    download: bool = False
+    cache_dir: Path = DEFAULT_CACHE
+
+
+def data_options(args):
+    """
+    Return the :class:`DataOptions` of parsed arguments.
+
+    Those of :func:`add_data_arguments`, and of
+    :func:`add_download_arguments` when the command has them.
+    """
+    return DataOptions(
+        ReaderOptions(
+            ap_columns=args.ap_columns, meta_columns=args.meta_columns,
+            building_column=args.building_column,
+            floor_column=args.floor_column, device_column=args.device_column,
+            time_column=args.time_column,
+            position_columns=args.position_columns,
+            not_detected_marker=args.not_detected_marker),
+        getattr(args, 'download', False),
+        getattr(args, 'cache_dir', DEFAULT_CACHE))
+
+
+def read_data(given, options, what, role='train', small_classes=None):
     """
     Read the data given on the command line, print how it was read.
 
-    ``given``: the paths (or None: the downloaded zip with --download).
-    Notes (columns left out, a detected marker ...) go to stderr always.
+    ``given``: the paths (or None: the downloaded zip, with
+    ``options.download``); ``options``: :class:`DataOptions`;
+    ``small_classes``: the policy of :class:`ReaderOptions`. Notes (columns
+    left out, a detected marker ...) go to stderr always.
     """
     if not given:
-        if not args.download:
+        if not options.download:
             raise DataError(f'no {what} given: pass a CSV path, a folder or '
                             f'--download')
-        given = [download_uci(args.cache_dir)]
-    options = ReaderOptions(
-        ap_columns=args.ap_columns, meta_columns=args.meta_columns,
-        building_column=args.building_column,
-        floor_column=args.floor_column, device_column=args.device_column,
-        time_column=args.time_column,
-        position_columns=args.position_columns,
-        not_detected_marker=args.not_detected_marker,
-        small_classes=small_classes)
-    fp = read_fingerprints(given, role, options)
+        given = [download_uci(options.cache_dir)]
+    reader = replace(options.reader, small_classes=small_classes)
+    fp = read_fingerprints(given, role, reader)
     for note in fp.notes:
         print(f'note: {note}', file=sys.stderr, flush=True)
     return fp

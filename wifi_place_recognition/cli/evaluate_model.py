@@ -9,8 +9,8 @@ from ..core.artifact import load_model
 from ..core.evaluation import evaluate
 from ..core.resources import default_model_path
 from ..data.predictions import write_predictions
-from .common import (add_data_arguments, add_download_arguments, main_wrapper,
-                     print_report, read_data)
+from .common import (add_data_arguments, add_download_arguments,
+                     data_options, main_wrapper, print_report, read_data)
 
 
 @main_wrapper
@@ -41,7 +41,7 @@ def main(argv=None):
     add_data_arguments(p)
     args = p.parse_args(argv)
     model = load_model(args.model or default_model_path())
-    fp = read_data(args.data, args, 'data', role='test')
+    fp = read_data(args.data, data_options(args), 'data', role='test')
     result = evaluate(model, fp)
     predictions = result.pop('predictions')
     if args.predictions:
@@ -60,7 +60,8 @@ def _plot(args, model, fp, result, predictions):
         from .plots import knn_baseline, plot_evaluation
         baseline = None
         if args.plot_baseline and 'position_mean_error_m' in result:
-            train_fp = read_data(args.plot_baseline, args, 'baseline data')
+            train_fp = read_data(args.plot_baseline, data_options(args),
+                                 'baseline data')
             baseline = knn_baseline(model, train_fp, fp)
         paths = plot_evaluation(args.plot, model, fp, result, predictions,
                                 baseline)

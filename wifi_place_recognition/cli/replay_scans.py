@@ -9,8 +9,8 @@ from rclpy.executors import ExternalShutdownException
 
 from ..data.predictions import write_predictions
 from ..ros.replayer import replay, ReplayOptions, summarise
-from .common import (add_data_arguments, add_download_arguments, main_wrapper,
-                     read_data)
+from .common import (add_data_arguments, add_download_arguments,
+                     data_options, main_wrapper, read_data)
 
 
 @main_wrapper
@@ -59,7 +59,7 @@ def main(argv=None):
         place_topic=args.place_topic, wait=args.wait, rate=args.rate,
         realtime=args.realtime, max_wait=args.max_wait, limit=args.limit,
         timeout=args.timeout, retries=args.retries, progress=args.progress)
-    fp = read_data(args.data, args, 'data', role='test')
+    fp = read_data(args.data, data_options(args), 'data', role='test')
     if args.realtime and 'TIMESTAMP' not in fp.meta:
         p.error(f'--realtime: {fp.source} has no TIMESTAMP column')
     rclpy.init(args=ros_args)

@@ -7,8 +7,8 @@ from dataclasses import fields
 from ..core.artifact import save_model
 from ..core.evaluation import evaluate
 from ..training.config import TrainConfig
-from .common import (add_data_arguments, add_download_arguments, main_wrapper,
-                     print_report, read_data)
+from .common import (add_data_arguments, add_download_arguments,
+                     data_options, main_wrapper, print_report, read_data)
 
 
 def _layers(text):
@@ -63,15 +63,16 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     config = TrainConfig(**{f.name: getattr(args, f.name)
                             for f in fields(TrainConfig)})
-    train_fp = read_data(args.data, args, 'training data',
+    data = data_options(args)
+    train_fp = read_data(args.data, data, 'training data',
                          small_classes=args.small_classes)
     validation_fp = None
     if args.validation:
-        validation_fp = read_data(args.validation, args, 'validation data',
+        validation_fp = read_data(args.validation, data, 'validation data',
                                   role='test')
     test_fp = None
     if args.test or (args.download and not args.data):
-        test_fp = read_data(args.test, args, 'test data', role='test')
+        test_fp = read_data(args.test, data, 'test data', role='test')
 
     def log(line):
         if not args.quiet:
