@@ -48,11 +48,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 from wifi_place_recognition.core.atomic import atomic_write  # noqa: E402
 from wifi_place_recognition.core.evaluation import (  # noqa: E402
-    position_errors)
+    align, position_errors)
 from wifi_place_recognition.core.metrics import (  # noqa: E402
     accuracies, class_index)
 from wifi_place_recognition.core.preprocessing import RssiScaler  # noqa
-from wifi_place_recognition.core.scan import ScanMapper  # noqa: E402
 from wifi_place_recognition.data.fingerprints import (  # noqa: E402
     read_fingerprints, ReaderOptions)
 from wifi_place_recognition.training.config import (  # noqa: E402
@@ -172,7 +171,7 @@ def knn_baselines(train_fp, test_fp, seed, folds=4):
     train_fp = train_fp.subset(~train_fp.empty_rows)
     classes, y = class_index(train_fp.building, train_fp.floor)
     split = grouped_folds(train_fp, y, folds, seed=seed).held_out
-    test_rssi = align_rssi(train_fp, test_fp)
+    test_rssi = align(train_fp, test_fp)
     ks = (1, 3, 5, 7, 11)
     best_class, best_pos = (-1, None), (np.inf, None)
     for rep, _, _ in _representations(train_fp, test_rssi):
@@ -223,11 +222,6 @@ def knn_baselines(train_fp, test_fp, seed, folds=4):
     out['random forest (100 trees, -110 dBm)'] = accuracies(
         test_fp.building, test_fp.floor, predicted[:, 0], predicted[:, 1])
     return out
-
-
-def align_rssi(train_fp, test_fp):
-    """Return the test scans on the training data's AP columns."""
-    return ScanMapper(train_fp.ap_ids).map_rows(test_fp.ap_ids, test_fp.rssi)
 
 
 def summary(values):

@@ -298,6 +298,31 @@ def test_offline_mapping_is_the_nodes_mapping(synthetic):
     np.testing.assert_array_equal(align(model, read), offline)
 
 
+def test_one_dataset_onto_anothers_ap_columns_as_the_node_maps():
+    # test data aligned onto training data (validation, baselines): the
+    # node's rule, not a name lookup of its own
+    train = Fingerprints(('aa:bb:cc:00:00:01', 'WAP002', 'aa:bb:cc:00:00:03'),
+                         np.zeros((1, 3), np.float32), np.zeros(1, np.int64),
+                         np.zeros(1, np.int64))
+    rssi = np.array([[-70, -40, -50, -90], [np.nan, -45, np.nan, -60],
+                     [-30, np.nan, -75, np.nan]], np.float32)
+    test = Fingerprints(('AA-BB-CC-00-00-03', 'wap002', 'AABBCC000003',
+                         'aa:bb:cc:00:00:09'), rssi, np.zeros(3, np.int64),
+                        np.zeros(3, np.int64))
+    aligned = align(train, test)
+    np.testing.assert_array_equal(aligned, [[np.nan, -40, -50],
+                                            [np.nan, -45, np.nan],
+                                            [np.nan, np.nan, -30]])
+    mapper = ScanMapper(train.ap_ids)
+    for row, mapped in zip(test.rssi, aligned):
+        seen = np.isfinite(row)
+        scan = mapper.map([n for n, s in zip(test.ap_ids, seen) if s],
+                          row[seen])
+        online = np.full(len(train.ap_ids), np.nan, np.float32)
+        online[scan.columns] = scan.rssi
+        np.testing.assert_array_equal(mapped, online)
+
+
 # 7. one building, a floor column of its own name -------------------------------
 
 def test_one_building_with_a_floor_column_of_its_own_name():

@@ -11,16 +11,16 @@ WRONG_BUILDING_M = 50.0
 PER_FLOOR_M = 4.0
 
 
-def align(model, fp):
+def align(onto, fp):
     """
-    Return ``fp.rssi`` on the model's AP vector, mapped as the node does.
+    Return ``fp.rssi`` on the AP columns of ``onto``, mapped as the node does.
 
-    APs the model knows but the file lacks are not detected; APs of the file
-    the model does not know are ignored; identifiers match as in the node
-    (case and separators ignored) and an AP read twice keeps its strongest
-    reading.
+    ``onto``: a model, or other fingerprints (anything with ``ap_ids``).
+    APs of ``onto`` that ``fp`` lacks are not detected; APs of ``fp`` that
+    ``onto`` lacks are ignored; identifiers match as in the node (case and
+    separators ignored) and an AP read twice keeps its strongest reading.
     """
-    return ScanMapper(model.ap_ids).map_rows(fp.ap_ids, fp.rssi)
+    return ScanMapper(onto.ap_ids).map_rows(fp.ap_ids, fp.rssi)
 
 
 def evaluate(model, fp):
