@@ -16,6 +16,7 @@ from wifi_place_recognition.ros.messages import status_values
 from wifi_place_recognition.ros.replayer import unique_stamps
 
 PERIOD = 5     # seconds between the walk's scans (their stamps)
+TRACKING_ON = ('-p', 'tracking:=true')    # off by default
 
 
 @pytest.fixture(scope='module')
@@ -68,7 +69,8 @@ class Walk:
 def test_node_holds_through_a_wrong_scan_and_follows_a_floor_change(
         ros, tmp_path, tracked_model):
     path, fp, rows = tracked_model
-    with running_node(ros, tmp_path, path, 'tracking_walk') as (client, *_):
+    with running_node(ros, tmp_path, path, 'tracking_walk',
+                      *TRACKING_ON) as (client, *_):
         walk = Walk(client, fp, rows)
         walk.step((0, 0), gap=700)      # after the probe: a new walk
         answers = [walk.step((0, 0)) for _ in range(8)]
@@ -88,7 +90,8 @@ def test_node_holds_through_a_wrong_scan_and_follows_a_floor_change(
 def test_reset_service_timeout_and_switching_tracking_off(
         ros, tmp_path, tracked_model):
     path, fp, rows = tracked_model
-    with running_node(ros, tmp_path, path, 'tracking_reset') as (client, *_):
+    with running_node(ros, tmp_path, path, 'tracking_reset',
+                      *TRACKING_ON) as (client, *_):
         walk = Walk(client, fp, rows)
         walk.step((0, 0), gap=700)      # after the probe: a new walk
         for _ in range(8):
@@ -141,7 +144,8 @@ def test_replay_scans_realtime_sends_each_walk_in_time_order_and_pace(
         lines.append(','.join(cells + ['0', '0', str(phone), f'{t:g}']))
     data = tmp_path / 'walks.csv'
     data.write_text('\n'.join(lines) + '\n')
-    with running_node(ros, tmp_path, path, 'tracking_replay'):
+    with running_node(ros, tmp_path, path, 'tracking_replay',
+                      *TRACKING_ON):
         seen = []
         sub = ros.create_subscription(
             DiagnosticArray, '/tracking_replay/place',

@@ -117,7 +117,7 @@ class ClassifierNode(Node):
                 integer_range=[IntegerRange(
                     from_value=1, to_value=1000000, step=1)])).value
         tracking = self.declare_parameter(
-            'tracking', True, ParameterDescriptor(
+            'tracking', False, ParameterDescriptor(
                 description='answer with the building/floor tracked over '
                             'the scans (false: each scan alone)')).value
         self.tracking_timeout = self.declare_parameter(
