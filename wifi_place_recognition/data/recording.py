@@ -8,13 +8,17 @@ The file is the generic format ``train_model`` reads: ``BUILDINGID``,
 scan of known APs is appended and fsynced; a scan with a new AP rewrites
 the file atomically with the wider header. A kill therefore loses at most
 the scan being written; on reopening, a torn last line is cut off and
-recording continues in the same file.
+recording continues in the same file. Scans that cannot be written wait in
+memory and are written with the next write that works.
 """
 
 from collections import Counter
+import contextlib
 import math
 import os
 from pathlib import Path
+import tempfile
+import time
 
 import numpy as np
 
@@ -47,6 +51,9 @@ class FingerprintLog:
 
     With ``positions``, every scan has a position and the file the ``X``,
     ``Y``, ``FRAME`` columns; a file is continued only the way it started.
+    A scan that cannot be written (the folder gone, the disk full) waits in
+    memory (``pending``; the error in ``write_error``) until :meth:`flush`
+    writes it, or :meth:`save_pending` puts it in another file.
     """
 
     def __init__(self, path, positions=False):
@@ -55,9 +62,26 @@ class FingerprintLog:
         self.leading = LEADING + (POSITION if positions else ())
         self.ap_ids = []
         self.counts = Counter()
+        self.pending = []       # (leading cells, {ap: dBm}) not yet written
+        self.write_error = None
+        self._check_folder()
         if self.path.exists() and self.path.stat().st_size:
             self._continue()
         self.index = {ap: j for j, ap in enumerate(self.ap_ids)}
+        self.written_aps = len(self.ap_ids)     # AP columns in the file
+
+    def _check_folder(self):
+        """Raise RecordingError unless a file can be created beside ``path``."""
+        try:
+            fd, probe = tempfile.mkstemp(dir=self.path.parent,
+                                         prefix=f'.{self.path.name}.',
+                                         suffix='.probe')
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as exc:
+            raise RecordingError(
+                f'output {self.path}: cannot write in the folder '
+                f'{self.path.parent} ({exc.strerror or exc})') from None
 
     def _continue(self):
         data = self.path.read_bytes()
@@ -89,13 +113,14 @@ class FingerprintLog:
 
     def add(self, names, rssi, building, floor, timestamp, position=None):
         """
-        Record one scan; return (recorded, readings left out).
+        Record one scan, then :meth:`flush`; return (recorded, left out).
 
         Readings that are not finite or outside the plausible RSSI range are
         left out; (0, 20] dBm is clipped to 0; a repeated AP keeps its
         strongest reading. A scan left with no reading is not recorded.
         ``position`` is (x, y, frame), given if and only if the log has
-        positions.
+        positions. A recorded scan that cannot be written yet stays in
+        ``pending``.
         """
         if (position is not None) != self.positions:
             raise ValueError('a position is needed exactly when the log '
@@ -114,34 +139,88 @@ class FingerprintLog:
             best[ap] = max(best.get(ap, -math.inf), value)
         if not best:
             return False, skipped
-        new = [ap for ap in best if ap not in self.index]
-        for ap in new:
-            self.index[ap] = len(self.ap_ids)
-            self.ap_ids.append(ap)
-        cells = [MISSING] * len(self.ap_ids)
-        for ap, value in best.items():
-            cells[self.index[ap]] = f'{value:g}'
+        for ap in best:
+            if ap not in self.index:
+                self.index[ap] = len(self.ap_ids)
+                self.ap_ids.append(ap)
         where = [] if position is None else \
             [f'{position[0]:.3f}', f'{position[1]:.3f}', position[2]]
-        row = ','.join([str(building), str(floor), f'{timestamp:.3f}']
-                       + where + cells) + '\n'
-        if new or not self.path.exists():
-            self._rewrite(len(new), row)
-        else:
-            with open(self.path, 'a') as f:
-                f.write(row)
-                f.flush()
-                os.fsync(f.fileno())
+        self.pending.append(
+            ([str(building), str(floor), f'{timestamp:.3f}'] + where, best))
         self.counts[(building, floor)] += 1
+        self.flush()
         return True, skipped
 
-    def _rewrite(self, n_new, row):
-        pad = (',' + MISSING) * n_new
+    def _rows(self):
+        """Return the pending scans as lines as wide as ``ap_ids``."""
+        lines = []
+        for leading, best in self.pending:
+            cells = [MISSING] * len(self.ap_ids)
+            for ap, value in best.items():
+                cells[self.index[ap]] = f'{value:g}'
+            lines.append(','.join(leading + cells) + '\n')
+        return ''.join(lines)
+
+    def flush(self):
+        """
+        Write the pending scans; return True when none is left waiting.
+
+        On failure they stay pending, ``write_error`` holds the OSError and
+        the file is as before (an append is cut back, a rewrite is atomic).
+        """
+        if not self.pending:
+            return True
+        try:
+            if self.written_aps < len(self.ap_ids) or not self.path.exists():
+                self._rewrite(self._rows())
+            else:
+                self._append(self._rows())
+        except OSError as exc:
+            self.write_error = exc
+            return False
+        self.written_aps = len(self.ap_ids)
+        self.pending.clear()
+        self.write_error = None
+        return True
+
+    def _append(self, rows):
+        with open(self.path, 'a') as f:
+            start = f.tell()
+            try:
+                f.write(rows)
+                f.flush()
+                os.fsync(f.fileno())
+            except OSError:
+                with contextlib.suppress(OSError):
+                    f.truncate(start)   # no torn line for the next append
+                raise
+
+    def _rewrite(self, rows):
+        pad = (',' + MISSING) * (len(self.ap_ids) - self.written_aps)
         with atomic_write(self.path, 'w') as out:
-            out.write(','.join(self.leading + tuple(self.ap_ids)) + '\n')
+            out.write(self.header())
             if self.path.exists():
                 with open(self.path) as old:
                     next(old, None)
                     for line in old:
                         out.write(line.rstrip('\n') + pad + '\n')
-            out.write(row)
+            out.write(rows)
+
+    def header(self):
+        """Return the header line for the APs seen so far."""
+        return ','.join(self.leading + tuple(self.ap_ids)) + '\n'
+
+    def save_pending(self, folder):
+        """
+        Write the pending scans to a new file in ``folder``; return its path.
+
+        A recording of its own (header and the pending scans only), named
+        after ``path`` with ``.unsaved-<time>``. Raises OSError.
+        """
+        name = (f'{self.path.stem}.unsaved-{time.strftime("%Y%m%d-%H%M%S")}'
+                f'{self.path.suffix}')
+        path = Path(folder) / name
+        with atomic_write(path, 'w') as out:
+            out.write(self.header() + self._rows())
+        self.pending.clear()
+        return path

@@ -4,6 +4,16 @@ from sensor_msgs.msg import JointState
 import numpy as np
 
 
+def seconds(stamp):
+    """Return a ``builtin_interfaces/Time`` in seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def stamp_time(stamp, clock):
+    """Return a header stamp in seconds; an unset (zero) one: ``clock``'s now."""
+    return seconds(stamp) or clock.now().nanoseconds * 1e-9
+
+
 def status_values(status):
     """Return a DiagnosticStatus's key/values as a dict."""
     return {kv.key: kv.value for kv in status.values}

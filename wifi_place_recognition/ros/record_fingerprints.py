@@ -9,6 +9,13 @@ Progress (scans per building/floor) is logged and published on
 ``/diagnostics``, with the scans received, those with no usable reading,
 the readings left out and the scans lost before they reached the node.
 
+The output folder must be writable at start-up. A write that fails later
+(the folder gone, the disk full) makes the status ERROR and is logged
+(throttled); the scans wait in memory and are written by the next write
+that works (tried with every scan and every second). Those still waiting
+at shutdown go to a new file in the temporary folder (or the home folder),
+which the log names.
+
 With ``pose_topic`` (e.g. ``/amcl_pose``), each scan also gets the x, y
 and frame of the pose nearest to it in time (scan and pose ``header.stamp``;
 a zero stamp means the time the node takes the message), if that pose is
@@ -26,7 +33,9 @@ sensor-data ones; parameters can override its reliability and durability.
 from collections import Counter, deque
 import copy
 import math
+from pathlib import Path
 import sys
+import tempfile
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped
@@ -38,6 +47,7 @@ from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data,
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
+from .messages import seconds, stamp_time
 from .runner import names_the_node, run
 from ..data.recording import FingerprintLog, frame_problem, RecordingError
 from .sequence import PublisherGaps
@@ -52,11 +62,6 @@ POSE_QOS_OVERRIDES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
                       QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
 #: Poses kept to label scans that waited in the queue.
 POSE_HISTORY = 500
-
-
-def _seconds(stamp):
-    """Return a header stamp in seconds."""
-    return stamp.sec + stamp.nanosec * 1e-9
 
 
 def _label(description):
@@ -92,7 +97,8 @@ class RecordFingerprintsNode(Node):
         self.log = FingerprintLog(output, positions=bool(pose_topic))
         self.counts = Counter(scans_received=0, scans_paused=0,
                               scans_unusable=0, scans_lost=0,
-                              skipped_readings=0)
+                              skipped_readings=0, write_errors=0)
+        self._failing = False
         self._gaps = PublisherGaps()
         self._poses = None
         self._frame = None
@@ -118,10 +124,6 @@ class RecordFingerprintsNode(Node):
                 f', positions from {self._pose_sub.topic_name}'
                 if pose_topic else ''))
 
-    def _time(self, seconds):
-        """Return a stamp's time; zero: the node's clock now."""
-        return seconds or self.get_clock().now().nanoseconds * 1e-9
-
     def _on_pose(self, msg):
         self.counts['poses_received'] += 1
         point = msg.pose.pose.position
@@ -133,12 +135,12 @@ class RecordFingerprintsNode(Node):
             self.get_logger().warn(f'pose ignored: {problem}',
                                    throttle_duration_sec=THROTTLE_S)
             return
-        self._poses.append((self._time(_seconds(msg.header.stamp)), point.x,
-                            point.y, msg.header.frame_id))
+        self._poses.append((stamp_time(msg.header.stamp, self.get_clock()),
+                            point.x, point.y, msg.header.frame_id))
 
     def _position(self, stamp):
         """Return (x, y, frame) of the pose nearest the scan, or None."""
-        t = self._time(stamp)
+        t = stamp_time(stamp, self.get_clock())
         max_age = self.get_parameter('max_pose_age').value
         if self._poses:
             nearest = min(self._poses, key=lambda pose: abs(pose[0] - t))
@@ -170,14 +172,15 @@ class RecordFingerprintsNode(Node):
             self.get_logger().warn('scan skipped: name and position differ '
                                    'in length', throttle_duration_sec=THROTTLE_S)
             return
-        stamp = _seconds(msg.header.stamp)
         position = None
         if self._poses is not None:
-            position = self._position(stamp)
+            position = self._position(msg.header.stamp)
             if position is None:
                 return
         recorded, skipped = self.log.add(msg.name, msg.position, building,
-                                         floor, stamp, position)
+                                         floor, seconds(msg.header.stamp),
+                                         position)
+        self._check_written()
         self.counts['skipped_readings'] += skipped
         if not recorded:
             self.counts['scans_unusable'] += 1
@@ -194,20 +197,65 @@ class RecordFingerprintsNode(Node):
             self.get_logger().info(f'building {building}, floor {floor}: '
                                    f'{n} scans')
 
+    def _check_written(self):
+        """Log a write error (throttled), or that writing works again."""
+        log = self.log
+        if log.write_error is not None:
+            if not self._failing:
+                self.counts['write_errors'] += 1
+            self._failing = True
+            self.get_logger().error(
+                f'cannot write {log.path}: {log.write_error}; '
+                f'{len(log.pending)} scans kept in memory, retrying every '
+                f'second and with each scan',
+                throttle_duration_sec=THROTTLE_S)
+        elif self._failing:
+            self._failing = False
+            self.get_logger().info(f'writing {log.path} works again: the '
+                                   f'scans kept in memory are written')
+
     def _publish_progress(self):
+        if self.log.pending:
+            self.log.flush()
+            self._check_written()
         counts = sorted(self.log.counts.items())
+        level, message = DiagnosticStatus.OK, ', '.join(
+            f'B{b}F{f}: {n}' for (b, f), n in counts) or 'no scans yet'
+        if self.log.write_error is not None:
+            level = DiagnosticStatus.ERROR
+            message = (f'cannot write: {self.log.write_error}; '
+                       f'{len(self.log.pending)} scans kept in memory; '
+                       + message)
         out = DiagnosticArray()
         out.header.stamp = self.get_clock().now().to_msg()
         out.status = [DiagnosticStatus(
-            level=DiagnosticStatus.OK, name=f'{self.get_name()}: progress',
-            message=', '.join(f'B{b}F{f}: {n}' for (b, f), n in counts)
-            or 'no scans yet',
-            hardware_id=str(self.log.path),
+            level=level, name=f'{self.get_name()}: progress',
+            message=message, hardware_id=str(self.log.path),
             values=[KeyValue(key=f'scans/B{b}F{f}', value=str(n))
                     for (b, f), n in counts] +
-            [KeyValue(key='aps', value=str(len(self.log.ap_ids)))] +
+            [KeyValue(key='aps', value=str(len(self.log.ap_ids))),
+             KeyValue(key='scans_waiting', value=str(len(self.log.pending)))] +
             [KeyValue(key=k, value=str(n)) for k, n in self.counts.items()])]
         self.diag_pub.publish(out)
+
+    def destroy_node(self):
+        """Write what waits in memory (else to a fallback file), then stop."""
+        log = self.log
+        if log.pending and not log.flush():
+            n = len(log.pending)
+            for folder in (tempfile.gettempdir(), Path.home()):
+                try:
+                    path = log.save_pending(folder)
+                except OSError as exc:
+                    self.get_logger().error(f'cannot save to {folder}: {exc}')
+                    continue
+                self.get_logger().error(
+                    f'cannot write {log.path}: {log.write_error}; the {n} '
+                    f'scans not in it are saved in {path}')
+                break
+            else:
+                self.get_logger().fatal(f'{n} scans could not be saved')
+        super().destroy_node()
 
 
 def main(args=None):
