@@ -41,6 +41,7 @@ setup(
             'classifier_node = '
             'wifi_place_recognition.ros.executables:classifier_node',
             'replay_scans = wifi_place_recognition.cli.replay_scans:main',
+            'fit_tracking = wifi_place_recognition.cli.fit_tracking:main',
             'wifi_scanner_node = '
             'wifi_place_recognition.ros.executables:wifi_scanner_node',
             'record_fingerprints = '

@@ -24,6 +24,10 @@ from .tracking import (DEFAULT_TIMEOUT, PlaceTracker, PositionFilter,
 
 #: Log belief of the true class counted at worst (one confident miss).
 LOG_FLOOR = math.log(1e-6)
+#: The grids searched.
+TEMPERATURES = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0)
+MIN_INTERVALS = (0.0, 5.0, 20.0, 60.0, 200.0)
+ACCELERATIONS = (0.001, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
 
 
 # rates, evidence, motion ----------------------------------------------------
@@ -90,13 +94,13 @@ def fit_rates(walks, timeout=DEFAULT_TIMEOUT):
     return floor_rate, building_rate, summary
 
 
-def filtered_scores(params, classes, walks):
+def filtered_scores(params, classes, walks, timeout=DEFAULT_TIMEOUT):
     """
     Return (mean log belief of the true class, accuracy) of tracked walks.
 
     ``walks`` is a list of (times, true class index, proba) in time order.
     """
-    tracker = PlaceTracker(classes, params)
+    tracker = PlaceTracker(classes, params, timeout)
     log_sum, right, n = 0.0, 0, 0
     for times, truth, proba in walks:
         for track, t in zip(track_walk(tracker, times, proba), truth):
@@ -108,8 +112,8 @@ def filtered_scores(params, classes, walks):
 
 
 def fit_evidence(params, classes, walks,
-                 temperatures=(1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0),
-                 min_intervals=(0.0, 5.0, 20.0, 60.0, 200.0)):
+                 temperatures=TEMPERATURES, min_intervals=MIN_INTERVALS,
+                 timeout=DEFAULT_TIMEOUT):
     """
     Choose ``temperature`` and ``min_interval`` on walks (grid search).
 
@@ -125,7 +129,8 @@ def fit_evidence(params, classes, walks,
         for min_interval in min_intervals:
             candidate = replace(params, temperature=temperature,
                                 min_interval=min_interval)
-            score, accuracy = filtered_scores(candidate, classes, walks)
+            score, accuracy = filtered_scores(candidate, classes, walks,
+                                              timeout)
             grid.append({'temperature': temperature,
                          'min_interval': min_interval,
                          'accuracy': round(accuracy, 6),
@@ -156,7 +161,7 @@ def _tracked_position_error(params, walks, timeout):
 
 
 def fit_motion(params, walks, timeout=DEFAULT_TIMEOUT,
-               accelerations=(0.001, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0)):
+               accelerations=ACCELERATIONS):
     """
     Choose ``speed_sd`` and ``acceleration_noise`` on walks with positions.
 
@@ -192,9 +197,9 @@ class FitOptions:
     """What :func:`fit_tracking` searches (grids) and its restart gap."""
 
     timeout: float = DEFAULT_TIMEOUT
-    temperatures: tuple = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0)
-    min_intervals: tuple = (0.0, 5.0, 20.0, 60.0, 200.0)
-    accelerations: tuple = (0.001, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
+    temperatures: tuple = TEMPERATURES
+    min_intervals: tuple = MIN_INTERVALS
+    accelerations: tuple = ACCELERATIONS
 
 
 @dataclass(frozen=True)
@@ -260,8 +265,9 @@ def fit_tracking(evidence, options=FitOptions()):
 
     Raise ValueError naming what is wrong when the walks cannot fit them:
     labels the model does not know, or no two scans of a walk within
-    ``options.timeout`` of each other. ``report`` holds the rates' summary,
-    the chosen values and the grids searched.
+    ``options.timeout`` of each other. ``report['summary']`` holds the
+    walks' figures (scans, rates, single-scan and tracked building+floor
+    accuracy with the choice), the rest the grids searched.
     """
     e = evidence
     lacking = [w for w in e.walks if (e.truth[w] < 0).any()]
@@ -285,8 +291,16 @@ def fit_tracking(evidence, options=FitOptions()):
     params, grid = fit_evidence(
         params, e.classes, [(e.times[w], e.truth[w], e.proba[w])
                             for w in e.walks],
-        options.temperatures, options.min_intervals)
-    report = {'rates': rates, 'evidence_grid': grid}
+        options.temperatures, options.min_intervals, options.timeout)
+    chosen = [g for g in grid if g['temperature'] == params.temperature
+              and g['min_interval'] == params.min_interval][0]
+    scans = np.concatenate(e.walks)
+    summary = {'walks': len(e.walks), 'scans': int(len(scans)),
+               'rates': rates,
+               'single_accuracy': float(np.mean(
+                   e.proba[scans].argmax(axis=1) == e.truth[scans])),
+               'tracked_accuracy': chosen['accuracy']}
+    report = {'summary': summary, 'evidence_grid': grid}
     if e.xy is not None and e.true_xy is not None:
         params, report['motion_grid'] = fit_motion(
             params, [(e.times[w], e.xy[w], e.cov[w], e.true_xy[w])
