@@ -6,8 +6,9 @@ import zipfile
 from conftest import dataset_file, mac, synthetic_csv
 import numpy as np
 import pytest
+from wifi_place_recognition.data.files import DataError, download_uci
 from wifi_place_recognition.data.fingerprints import (
-    DataError, download_uci, parse_fingerprints, read_fingerprints)
+    parse_fingerprints, read_fingerprints)
 
 HEADER = 'WAP001,WAP002,FLOOR,BUILDINGID,PHONEID'
 

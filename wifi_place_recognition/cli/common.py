@@ -7,8 +7,9 @@ import sys
 from pathlib import Path
 
 from ..core.artifact import ModelFileError
-from ..data.fingerprints import (DataError, download_uci, read_fingerprints,
-                                 ReaderOptions, SMALL_CLASS_POLICIES)
+from ..data.files import DataError, download_uci
+from ..data.fingerprints import (read_fingerprints, ReaderOptions,
+                                 SMALL_CLASS_POLICIES)
 
 DEFAULT_CACHE = Path(os.environ.get('XDG_CACHE_HOME', Path.home() / '.cache')
                      ) / 'wifi_place_recognition'

@@ -25,7 +25,7 @@ import numpy as np
 from ..core.atomic import atomic_write
 from ..core.rssi import clip_plausible, plausible
 from ..core.scan import normalize_ap_id
-from .fingerprints import NOT_DETECTED_MARKER
+from .columns import NOT_DETECTED_MARKER
 
 LEADING = ('BUILDINGID', 'FLOOR', 'TIMESTAMP')
 POSITION = ('X', 'Y', 'FRAME')
