@@ -2,11 +2,13 @@
 
 import argparse
 from dataclasses import replace
+import json
 import sys
 import time
 from pathlib import Path
 
 from ..core.artifact import load_model, save_model
+from ..core.atomic import atomic_write
 from ..core.tracking_fit import FitOptions, fit_tracking, walk_evidence
 from ..data.walks import walks
 from .common import add_data_arguments, data_options, main_wrapper, read_data
@@ -36,6 +38,8 @@ def main(argv=None):
                    metavar='S',
                    help='scans further apart are not one walk (the node\'s '
                         'tracking_timeout; default: %(default)s)')
+    p.add_argument('--report', type=Path, metavar='OUT.json',
+                   help='also write the figures and the grids searched')
     add_data_arguments(p)
     args = p.parse_args(argv)
     if not args.timeout > 0:
@@ -67,6 +71,9 @@ def main(argv=None):
           f'tracked {tracked:.4f}: tracking:=true '
           + ('helps here' if tracked > single else
              'does not help here (keep tracking:=false)'))
+    if args.report:
+        with atomic_write(args.report, 'w') as f:
+            json.dump(report, f, indent=1)
     print(f'wrote {out}')
     return 0
 
