@@ -1,8 +1,68 @@
 from glob import glob
+import importlib
+import os
 
 from setuptools import find_packages, setup
 
 package_name = 'wifi_place_recognition'
+console_scripts = [
+    'train_model = wifi_place_recognition.cli.train_model:main',
+    'evaluate_model = wifi_place_recognition.cli.evaluate_model:main',
+    'classifier_node = wifi_place_recognition.ros.executables:classifier_node',
+    'replay_scans = wifi_place_recognition.cli.replay_scans:main',
+    'fit_tracking = wifi_place_recognition.cli.fit_tracking:main',
+    'wifi_scanner_node = '
+    'wifi_place_recognition.ros.executables:wifi_scanner_node',
+    'record_fingerprints = '
+    'wifi_place_recognition.ros.executables:record_fingerprints',
+]
+# `ros2 run` runs <prefix>/lib/<package>/<executable>. colcon's builds
+# (setup.py install / develop) put the console scripts there by setup.cfg;
+# a wheel (pip install .) cannot: pip puts them in <prefix>/bin. A wheel can
+# only add files under <prefix> as data, copied verbatim, so it gets one
+# small shell script per executable in <prefix>/lib/<package> that runs the
+# console script in <prefix>/bin. (pip install -e . installs no data files:
+# no ros2 run, no share directory.)
+WRAPPER = """#!/bin/sh
+# ros2 run after a pip install: the console script that pip put in bin.
+exec "$(dirname "$0")/../../bin/{name}" "$@"
+"""
+
+
+def ros2_run_wrappers(command):
+    """Return a subclass of ``command`` that adds the wrapper scripts."""
+    class WithWrappers(command):
+        def run(self):
+            folder = os.path.join(
+                self.get_finalized_command('build').build_base, 'ros2_run')
+            os.makedirs(folder, exist_ok=True)
+            wrappers = []
+            for script in console_scripts:
+                name = script.split('=')[0].strip()
+                path = os.path.join(folder, name)
+                with open(path, 'w') as f:
+                    f.write(WRAPPER.format(name=name))
+                os.chmod(path, 0o755)
+                wrappers.append(path)
+            entry = ('lib/' + package_name, wrappers)
+            if entry not in self.distribution.data_files:
+                self.distribution.data_files.append(entry)
+            super().run()
+    return WithWrappers
+
+
+def wheel_command():
+    """Return the bdist_wheel class, None where no wheel can be built."""
+    # setuptools >= 70.1 has its own; older ones use the wheel package's.
+    for module in ('setuptools.command.bdist_wheel', 'wheel.bdist_wheel'):
+        try:
+            return importlib.import_module(module).bdist_wheel
+        except ImportError:
+            pass
+    return None
+
+
+bdist_wheel = wheel_command()
 
 setup(
     name=package_name,
@@ -34,18 +94,8 @@ setup(
     description='Building and floor recognition from one WiFi scan '
                 '(SAE + classifier) with a ROS 2 node.',
     license='Apache-2.0',
-    entry_points={
-        'console_scripts': [
-            'train_model = wifi_place_recognition.cli.train_model:main',
-            'evaluate_model = wifi_place_recognition.cli.evaluate_model:main',
-            'classifier_node = '
-            'wifi_place_recognition.ros.executables:classifier_node',
-            'replay_scans = wifi_place_recognition.cli.replay_scans:main',
-            'fit_tracking = wifi_place_recognition.cli.fit_tracking:main',
-            'wifi_scanner_node = '
-            'wifi_place_recognition.ros.executables:wifi_scanner_node',
-            'record_fingerprints = '
-            'wifi_place_recognition.ros.executables:record_fingerprints',
-        ],
-    },
+    entry_points={'console_scripts': console_scripts},
+    # colcon builds do not build a wheel: this does not touch them.
+    cmdclass={'bdist_wheel': ros2_run_wrappers(bdist_wheel)}
+    if bdist_wheel else {},
 )

@@ -117,8 +117,10 @@ def test_pip_install_in_a_fresh_venv_needs_no_ros_variables(ros, tmp_path):
                      '--json'], env=env, cwd=tmp_path)
     assert evaluated.returncode == 0, evaluated.stderr
     assert json.loads(evaluated.stdout)['building_floor_accuracy'] == 1.0
+    # Where `ros2 run wifi_place_recognition classifier_node` looks.
     assert status_ok(_answer_from_installed(
-        ros, tmp_path, venv / 'bin' / 'classifier_node', venv, env))
+        ros, tmp_path, venv / 'lib' / 'wifi_place_recognition' /
+        'classifier_node', venv, env))
 
 
 def test_source_checkout_uses_its_models_folder(tmp_path):
