@@ -87,6 +87,19 @@ def test_node_holds_through_a_wrong_scan_and_follows_a_floor_change(
         assert after[1] == (0, 1) and after[1:] == [(0, 1)] * 5, after
 
 
+def test_tracking_is_off_by_default(ros, tmp_path, tracked_model):
+    """On WiFine val/ tracking did not beat single scans (README)."""
+    path, fp, rows = tracked_model
+    with running_node(ros, tmp_path, path, 'tracking_default') as (
+            client, *_):
+        walk = Walk(client, fp, rows)
+        for _ in range(8):
+            walk.step((0, 0))
+        tracked, alone, values, _ = walk.step((0, 1))
+        assert tracked == alone == (0, 1)
+        assert values['confidence'] == values['scan_confidence']
+
+
 def test_reset_service_timeout_and_switching_tracking_off(
         ros, tmp_path, tracked_model):
     path, fp, rows = tracked_model
