@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Set up .venv and run the whole test suite. Tests that need UJIIndoorLoc read
-# it from $WIFI_PR_DATASET (default: ../shared/datasets/ujiindoorloc if present).
+# Set up .venv and run the whole test suite (the CI command). Tests that need
+# UJIIndoorLoc read it from $WIFI_PR_DATASET (default:
+# ../shared/datasets/ujiindoorloc if present). Arguments go to pytest, e.g.
+# "-m unit" for the fast tier (tiers: test/conftest.py).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh

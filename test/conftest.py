@@ -1,11 +1,26 @@
-"""Shared fixtures: synthetic fingerprints, a small trained model, ROS set-up."""
+"""
+Shared fixtures and the test tiers.
+
+Fixtures: synthetic fingerprints, a small trained model, ROS set-up. Each
+test is marked with its tiers from what it uses (its code, its fixtures
+and the helpers they call), so new test files are sorted too:
+
+- ``ros``: ROS 2 (an rclpy node, a node process, messages);
+- ``dataset``: UJIIndoorLoc or WiFine (``dataset_file``, ``WIFINE``);
+- ``system``: other processes (the executables, a venv, colcon);
+- ``stress``: a busy core, scan floods, signals at random moments;
+- ``linter``: flake8, pep257;
+- ``unit``: none of these: in-process, synthetic data (``-m unit``).
+"""
 
 import fcntl
+import inspect
 import os
 from pathlib import Path
 import subprocess
 import sys
 import time
+from xml.etree import ElementTree
 
 import numpy as np
 import pytest
@@ -47,6 +62,7 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
 TEST_DIR = Path(__file__).resolve().parent
 REPO = TEST_DIR.parent
+FIXTURES = TEST_DIR / 'fixtures'
 DATASET = os.environ.get('WIFI_PR_DATASET')
 
 
@@ -152,14 +168,38 @@ def python_module(module, *args):
 
 def wait_until(predicate, timeout, spin=None):
     """Poll (or spin ``spin``) until ``predicate()``; return its last value."""
-    import rclpy
     deadline = time.monotonic() + timeout
     while not predicate() and time.monotonic() < deadline:
         if spin is not None:
+            import rclpy
             rclpy.spin_once(spin, timeout_sec=0.02)
         else:
             time.sleep(0.02)
     return predicate()
+
+
+def process_alive(pid):
+    """Return True if process ``pid`` exists and is not a zombie."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return Path(f'/proc/{pid}/stat').read_text().split()[2] != 'Z'
+
+
+@pytest.fixture
+def fake_tools(tmp_path, monkeypatch):
+    """Put fake ``iw`` and ``nmcli`` on PATH; return their folder."""
+    folder = tmp_path / 'bin'
+    folder.mkdir()
+
+    def install(name, script):
+        path = folder / name
+        path.write_text('#!/bin/sh\n' + script)
+        path.chmod(0o755)
+    install.folder = folder
+    monkeypatch.setenv('PATH', f'{folder}{os.pathsep}/usr/bin:/bin')
+    return install
 
 
 @pytest.fixture(scope='module')
@@ -171,3 +211,88 @@ def ros():
     yield node
     node.destroy_node()
     rclpy.try_shutdown()
+
+
+# Test tiers -------------------------------------------------------------------
+#: Every ROS package the package declares (package.xml), and its ROS side.
+ROS_PACKAGES = {e.text for tag in ('depend', 'exec_depend') for e in
+                ElementTree.parse(REPO / 'package.xml').getroot().iter(tag)
+                if not e.text.startswith('python3-')} | {
+    'rclpy', 'wifi_place_recognition.ros'}
+#: What marks a test ``dataset``, ``system``, ``stress`` when it reaches it.
+DATASET_NAMES = {'dataset_file', 'DATASET', 'WIFINE'}
+SYSTEM_NAMES = {'run', 'python_module', 'subprocess'}
+STRESS_NAMES = {'busy_core', 'fuzz_scans', 'Harness'}
+
+
+def _origin(value):
+    """Return the dotted module a global value comes from ('' if none)."""
+    if inspect.ismodule(value):
+        return value.__name__
+    return getattr(value, '__module__', None) or ''
+
+
+def _reached(item):
+    """
+    Return {name: value} of the globals a test reaches.
+
+    From the test function and its fixtures, through every function and
+    class of the test folder they use (helpers, conftest), transitively.
+    """
+    defs = item._fixtureinfo.name2fixturedefs
+    todo = [item.function] + [d.func for name in item.fixturenames
+                              for d in defs.get(name, ())]
+    seen, reached = set(), {}
+    while todo:
+        obj = inspect.unwrap(todo.pop())
+        if id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        if inspect.isclass(obj):
+            todo += [v for v in vars(obj).values() if inspect.isfunction(v)]
+            continue
+        codes = [obj.__code__]
+        while codes:
+            code = codes.pop()
+            codes += [c for c in code.co_consts if inspect.iscode(c)]
+            for name in code.co_names:
+                if name not in obj.__globals__:
+                    continue
+                value = reached[name] = obj.__globals__[name]
+                if (inspect.isfunction(value) or inspect.isclass(value)) \
+                        and _in_test_dir(value):
+                    todo.append(value)
+    return reached
+
+
+def _in_test_dir(value):
+    try:
+        return Path(inspect.getfile(value)).parent == TEST_DIR
+    except TypeError:
+        return False
+
+
+def tiers(item):
+    """Return the marker names (tiers) of a collected test."""
+    if item.get_closest_marker('linter'):
+        return {'linter'}
+    reached = _reached(item)
+    found = set()
+    origins = {_origin(v) for v in reached.values()}
+    if 'ros' in item.fixturenames or any(
+            o == p or o.startswith(p + '.')
+            for o in origins for p in ROS_PACKAGES):
+        found.add('ros')
+    for tier, names in (('dataset', DATASET_NAMES),
+                        ('system', SYSTEM_NAMES), ('stress', STRESS_NAMES)):
+        if names & reached.keys():
+            found.add(tier)
+    return found or {'unit'}
+
+
+def pytest_collection_modifyitems(items):
+    """Mark every test with its tiers (see the module docstring)."""
+    for item in items:
+        if isinstance(item, pytest.Function):
+            for tier in tiers(item):
+                item.add_marker(tier)
