@@ -1,9 +1,10 @@
 """Tracking over real ROS: a walk through classifier_node, reset, timeout."""
 
+import re
 import subprocess
 import time
 
-from conftest import python_module, wait_until
+from conftest import python_module, run, wait_until
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import pytest
@@ -140,6 +141,42 @@ def test_replayed_stamps_are_distinct_and_never_zero():
                   1371713733250000000, 5 * 10 ** 9 + 2000]
 
 
+def walks_csv(path, fp, scans):
+    """Write (time, phone, row of ``fp``, (building, floor)) as a CSV."""
+    header = list(fp.ap_ids) + ['BUILDINGID', 'FLOOR', 'PHONEID', 'TIMESTAMP']
+    lines = [','.join(header)]
+    for t, phone, row, (b, f) in scans:
+        cells = ['100' if np.isnan(v) else f'{v:g}' for v in fp.rssi[row]]
+        lines.append(','.join(cells + [str(b), str(f), str(phone), f'{t:g}']))
+    path.write_text('\n'.join(lines) + '\n')
+    return path
+
+
+def test_replay_scans_shows_each_walk_scan_alone_beside_tracked(
+        ros, tmp_path, tracked_model):
+    path, fp, rows = tracked_model
+    # phone 1 on building 0 floor 0, its 5th scan reads like floor 1;
+    # phone 2, 10 s later, on building 1: a fresh walk (the node's belief
+    # is reset), else the building change would be held
+    wrong = iter(rows[(0, 1)][20:])
+    floor_0, building_1 = iter(rows[(0, 0)][20:]), iter(rows[(1, 1)][20:])
+    scans = [(100.0 + 5 * i, 1, next(wrong if i == 4 else floor_0), (0, 0))
+             for i in range(9)]
+    scans += [(150.0 + 5 * i, 2, next(building_1), (1, 1)) for i in range(5)]
+    data = walks_csv(tmp_path / 'walks.csv', fp, scans[::-1])
+    with running_node(ros, tmp_path, path, 'tracking_walks', *TRACKING_ON):
+        replay = run(python_module('cli.replay_scans', '--data', data,
+                                   '--place-topic', '/tracking_walks/place',
+                                   '--timeout', 20), timeout=300)
+    assert replay.returncode == 0, replay.stdout + replay.stderr
+    out = replay.stdout
+    assert '14/14 scans answered (0 rejected), 2 walks, each in time order' \
+        in out
+    assert re.search(r'PHONEID=1 +0\.8889 +1\.0000 +\(9 scans\)', out), out
+    assert re.search(r'PHONEID=2 +1\.0000 +1\.0000 +\(5 scans\)', out), out
+    assert re.search(r'building\+floor +0\.9286 +1\.0000\n', out), out
+
+
 def test_replay_scans_realtime_sends_each_walk_in_time_order_and_pace(
         ros, tmp_path, tracked_model):
     path, fp, rows = tracked_model
@@ -149,14 +186,8 @@ def test_replay_scans_realtime_sends_each_walk_in_time_order_and_pace(
     scans = [(t, phone, row) for phone, ts in times.items()
              for t, row in zip(ts, rows[(0, 0)][10:])]
     order = np.random.default_rng(0).permutation(len(scans))
-    header = list(fp.ap_ids) + ['BUILDINGID', 'FLOOR', 'PHONEID', 'TIMESTAMP']
-    lines = [','.join(header)]
-    for i in order:
-        t, phone, row = scans[i]
-        cells = ['100' if np.isnan(v) else f'{v:g}' for v in fp.rssi[row]]
-        lines.append(','.join(cells + ['0', '0', str(phone), f'{t:g}']))
-    data = tmp_path / 'walks.csv'
-    data.write_text('\n'.join(lines) + '\n')
+    data = walks_csv(tmp_path / 'walks.csv', fp, [
+        scans[i] + ((0, 0),) for i in order])
     with running_node(ros, tmp_path, path, 'tracking_replay',
                       *TRACKING_ON):
         seen = []

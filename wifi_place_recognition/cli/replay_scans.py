@@ -19,7 +19,9 @@ def main(argv=None):
     p = argparse.ArgumentParser(
         allow_abbrev=False, prog='replay_scans',
         description='Publish the rows of a UJIIndoorLoc-format CSV as WiFi '
-                    'scans and report how the classifier node answered.')
+                    'scans (walk after walk, each in time order, when it '
+                    'has a TIMESTAMP) and report how the classifier node '
+                    'answered, beside each scan\'s own answer.')
     p.add_argument('--data', nargs='+', metavar='PATH',
                    help='labelled CSV(s) or folder(s) of CSVs, or the UCI '
                         'zip')
@@ -31,13 +33,18 @@ def main(argv=None):
                         'recorded pace times FACTOR (1: real time, 10: ten '
                         'times faster; each scan is also answered before '
                         'the next); needs a TIMESTAMP column')
+    p.add_argument('--file-order', action='store_true',
+                   help='send the rows in file order (default with a '
+                        'TIMESTAMP: walk after walk, in time order, the '
+                        'node\'s tracking reset before each walk)')
     p.add_argument('--max-wait', type=float, default=10.0, metavar='S',
                    help='--realtime: wait at most S seconds between two '
                         'scans (default: %(default)s)')
     p.add_argument('--limit', type=int, default=None,
                    help='replay at most N rows')
     p.add_argument('--place-topic', default='/classifier_node/place',
-                   help='where the node answers (default: %(default)s)')
+                   help='where the node answers (default: %(default)s; '
+                        'its reset service is beside it)')
     p.add_argument('--timeout', type=float, default=1.0,
                    help='seconds to wait for an answer (default: 1)')
     p.add_argument('--retries', type=int, default=2,
@@ -53,21 +60,24 @@ def main(argv=None):
     add_download_arguments(p)
     add_data_arguments(p)
     args, ros_args = p.parse_known_args(argv)
-    if args.realtime < 0 or (args.realtime and args.rate):
-        p.error('--realtime FACTOR must be > 0, and not with --rate')
-    options = ReplayOptions(
-        place_topic=args.place_topic, wait=args.wait, rate=args.rate,
-        realtime=args.realtime, max_wait=args.max_wait, limit=args.limit,
-        timeout=args.timeout, retries=args.retries, progress=args.progress)
     fp = read_data(args.data, data_options(args), 'data', role='test')
-    if args.realtime and 'TIMESTAMP' not in fp.meta:
+    timed = 'TIMESTAMP' in fp.meta
+    if args.realtime and not timed:
         p.error(f'--realtime: {fp.source} has no TIMESTAMP column')
+    try:
+        options = ReplayOptions(
+            place_topic=args.place_topic, wait=args.wait, rate=args.rate,
+            by_walk=timed and not args.file_order, realtime=args.realtime,
+            max_wait=args.max_wait, limit=args.limit, timeout=args.timeout,
+            retries=args.retries, progress=args.progress)
+    except ValueError as exc:
+        p.error(f'--realtime, --rate, --file-order: {exc}')
     rclpy.init(args=ros_args)
     node = rclpy.create_node('scan_replayer')
     try:
-        rows, answers = replay(node, fp, options,
-                               lambda s: print(s, file=sys.stderr,
-                                               flush=True))
+        groups, answers = replay(node, fp, options,
+                                 lambda s: print(s, file=sys.stderr,
+                                                 flush=True))
     except (KeyboardInterrupt, ExternalShutdownException):
         return 130
     except RuntimeError as exc:
@@ -76,16 +86,37 @@ def main(argv=None):
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-    summary, predictions = summarise(fp, rows, answers)
+    summary, per_walk, predictions = summarise(fp, groups, answers)
     if args.predictions:
-        write_predictions(args.predictions, fp.subset(np.sort(rows)),
-                          predictions)
-    print(f'{fp.source}: {summary["answered"]}/{len(rows)} scans answered '
-          f'({summary["rejected"]} rejected)')
-    for key in ('building_accuracy', 'floor_accuracy',
-                'building_floor_accuracy'):
-        print(f'  {key.replace("_", " "):24s} {summary[key]:.4f}')
-    return 0 if summary['answered'] == len(rows) else 1
+        write_predictions(args.predictions, fp.subset(np.sort(
+            np.concatenate(groups))), predictions)
+    report(fp, options, summary, per_walk)
+    return 0 if summary['answered'] == summary['sent'] else 1
+
+
+def report(fp, options, summary, per_walk):
+    """Print the answers' accuracy beside the scans' own, walk by walk."""
+    order = f'{len(per_walk)} walks, each in time order' if \
+        options.by_walk else 'file order'
+    print(f'{fp.source}: {summary["answered"]}/{summary["sent"]} scans '
+          f'answered ({summary["rejected"]} rejected), {order}')
+    print(f'{"":28s} {"scan alone":>10s} {"answer":>10s}  (the node\'s '
+          f'answer: tracked with tracking:=true)')
+    if len(per_walk) > 1:
+        print('building+floor, per walk')
+        for walk in per_walk:
+            if walk['scans']:
+                print(f'  {walk["walk"][:26]:26s} '
+                      f'{walk["scan_building_floor_accuracy"]:10.4f} '
+                      f'{walk["answer_building_floor_accuracy"]:10.4f}  '
+                      f'({walk["scans"]} scans)')
+    for key, name in (('building_accuracy', 'building'),
+                      ('floor_accuracy', 'floor'),
+                      ('building_floor_accuracy', 'building+floor'),
+                      ('position_mean_error_m', 'position mean error (m)')):
+        if f'answer_{key}' in summary:
+            print(f'{name:28s} {summary[f"scan_{key}"]:10.4f} '
+                  f'{summary[f"answer_{key}"]:10.4f}')
 
 
 if __name__ == '__main__':
