@@ -27,17 +27,15 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.core.atomic import atomic_write
+from wifi_place_recognition.core.recognizer import PlaceRecognizer
+from wifi_place_recognition.core.resources import default_model_path
+from wifi_place_recognition.core.tracking import PlaceTracker
+from wifi_place_recognition.data.fingerprints import read_fingerprints
+from wifi_place_recognition.ros.messages import scan_message, status_values
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-from wifi_place_recognition.core.artifact import load_model  # noqa: E402
-from wifi_place_recognition.core.atomic import atomic_write  # noqa: E402
-from wifi_place_recognition.core.recognizer import PlaceRecognizer  # noqa
-from wifi_place_recognition.core.resources import default_model_path  # noqa
-from wifi_place_recognition.core.tracking import PlaceTracker  # noqa: E402
-from wifi_place_recognition.data.fingerprints import read_fingerprints  # noqa
-from wifi_place_recognition.ros.messages import (  # noqa: E402
-    scan_message, status_values)
 
 VARIANTS = {
     'numpy (shipped node)': [sys.executable, '-m',

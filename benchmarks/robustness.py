@@ -28,17 +28,18 @@ import time
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.core.atomic import atomic_write
+from wifi_place_recognition.core.resources import default_model_path
+from wifi_place_recognition.data.fingerprints import read_fingerprints
+from wifi_place_recognition.ros.messages import status_values
+
 from node import Bench, RELIABLE, rss_mib
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(ROOT), str(ROOT / "test")]
-from wifi_place_recognition.core.artifact import load_model  # noqa: E402
-from wifi_place_recognition.core.atomic import atomic_write  # noqa: E402
-from wifi_place_recognition.data.fingerprints import read_fingerprints  # noqa
-from fuzz import (  # noqa: E402
-    fuzz_scans, hostile_model_files)
-from wifi_place_recognition.ros.messages import status_values  # noqa: E402
-from wifi_place_recognition.core.resources import default_model_path  # noqa
+# The tests' helpers (not part of the package): fuzzed scans, hostile files.
+sys.path.insert(0, str(ROOT / 'test'))
+from fuzz import fuzz_scans, hostile_model_files  # noqa: E402
 
 NODE = [sys.executable, '-m', 'wifi_place_recognition.ros.classifier_node']
 EVALUATE = [sys.executable, '-m', 'wifi_place_recognition.cli.evaluate_model']

@@ -25,11 +25,12 @@ import time
 
 import numpy as np
 import rclpy
+from wifi_place_recognition.core.atomic import atomic_write
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(ROOT), str(ROOT / 'test')]
+# The tests' helpers (not part of the package): the signal harness.
+sys.path.insert(0, str(ROOT / 'test'))
 from signals import busy_core, Harness, KINDS, ok, plan  # noqa: E402
-from wifi_place_recognition.core.atomic import atomic_write  # noqa: E402
 
 
 def summary(outcomes):
