@@ -19,22 +19,18 @@ one USERID and PHONEID; each in TIMESTAMP order.
 import argparse
 import json
 from pathlib import Path
-import sys
 import tempfile
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from wifi_place_recognition.cli import fit_tracking  # noqa: E402
-from wifi_place_recognition.cli.common import (  # noqa: E402
+from wifi_place_recognition.cli import fit_tracking
+from wifi_place_recognition.cli.common import (
     add_data_arguments, add_download_arguments, data_options, read_data)
-from wifi_place_recognition.core.artifact import load_model  # noqa: E402
-from wifi_place_recognition.core.atomic import atomic_write  # noqa: E402
-from wifi_place_recognition.core.tracking import (  # noqa: E402
+from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.core.atomic import atomic_write
+from wifi_place_recognition.core.tracking import (
     DEFAULT_TIMEOUT, PlaceTracker, track_walk, TrackingParams)
-from wifi_place_recognition.core.tracking_fit import (  # noqa: E402
-    walk_evidence)
-from wifi_place_recognition.data.walks import walk_name, walks  # noqa: E402
+from wifi_place_recognition.core.tracking_fit import walk_evidence
+from wifi_place_recognition.data.walks import walk_name, walks
 
 RESULTS = Path(__file__).resolve().parent / 'results'
 
