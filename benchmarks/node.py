@@ -144,7 +144,7 @@ def stages(fp, passes):
     """
     model = load_model(default_model_path())
     recognizer = PlaceRecognizer(model)
-    recognizer.track(True, 60.0)
+    recognizer.configure(tracking=True, tracking_timeout=60.0)
     tracker = PlaceTracker(model.classes, model.tracking, 60.0)
     scans = []
     for row in fp.rssi:

@@ -332,7 +332,7 @@ def test_recognizer_answers_tracked_and_keeps_the_scan_answer(synthetic):
     evidence = iter([scan(0, 0.9, k)] * 10 + [scan(1, 0.9, k)]
                     + [scan(0, 0.9, k)] * 3)
     recognizer = PlaceRecognizer(model, forward=lambda columns, inputs: next(evidence))
-    recognizer.track(True, 600.0)
+    recognizer.configure(tracking=True)
     names = model.ap_ids[:5]
     places = [recognizer.classify(names, [-60] * 5, 5.0 * i)
               for i in range(14)]
@@ -346,7 +346,7 @@ def test_recognizer_answers_tracked_and_keeps_the_scan_answer(synthetic):
     assert all((p.building, p.floor) == tuple(model.classes[0])
                for p in places)
     # without tracking (or without a time) the answer is the scan's own
-    recognizer.track(False, 600.0)
+    recognizer.configure(tracking=False)
     evidence = iter([scan(1, 0.4, k)])
     alone = recognizer.classify(names, [-60] * 5, 100.0)
     assert (alone.building, alone.floor) == tuple(model.classes[1])

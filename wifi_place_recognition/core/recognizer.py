@@ -6,7 +6,7 @@ import numpy as np
 
 from .model import ScanForward
 from .scan import ScanMapper
-from .tracking import PlaceTracker
+from .tracking import DEFAULT_TIMEOUT, PlaceTracker
 
 OK, WARN = 'ok', 'warn'
 
@@ -50,9 +50,9 @@ class PlaceRecognizer:
     ``forward(columns, inputs)`` turns a scan's detected APs
     (:meth:`PlaceModel.relative`) into class probabilities (default: the numpy
     :class:`ScanForward` of ``model``). A model with a position output
-    also places the scan (:class:`.locator.Locator`). With a
-    ``tracker`` (:meth:`track`), scans given a time are tracked over time
-    and the answer is the tracked one.
+    also places the scan (:class:`.locator.Locator`). With ``tracking``
+    (:meth:`configure`), scans given a time are tracked over time and the
+    answer is the tracked one (``tracker``).
     """
 
     def __init__(self, model, min_confidence=0.5, min_known_aps=3,
@@ -62,12 +62,32 @@ class PlaceRecognizer:
         self.mapper = ScanMapper(model.ap_ids, max_aps)
         self.min_confidence = min_confidence
         self.min_known_aps = min_known_aps
+        self.tracking_timeout = DEFAULT_TIMEOUT
         self.tracker = None
 
-    def track(self, enabled, timeout):
-        """Start tracking afresh (the model file's parameters), or stop."""
-        self.tracker = PlaceTracker(self.model.classes, self.model.tracking,
-                                    timeout) if enabled else None
+    def configure(self, min_confidence=None, min_known_aps=None,
+                  max_aps=None, tracking=None, tracking_timeout=None):
+        """
+        Change the settings given (None: keep).
+
+        ``tracking_timeout`` (s) also applies to the running tracker;
+        ``tracking`` true starts tracking afresh (the model file's
+        parameters), false stops it.
+        """
+        if min_confidence is not None:
+            self.min_confidence = min_confidence
+        if min_known_aps is not None:
+            self.min_known_aps = min_known_aps
+        if max_aps is not None:
+            self.mapper.max_aps = max_aps
+        if tracking_timeout is not None:
+            self.tracking_timeout = tracking_timeout
+            if self.tracker is not None:
+                self.tracker.timeout = tracking_timeout
+        if tracking is not None:
+            self.tracker = PlaceTracker(
+                self.model.classes, self.model.tracking,
+                self.tracking_timeout) if tracking else None
 
     def classify(self, names, rssi, time=None):
         """
@@ -112,3 +132,14 @@ class PlaceRecognizer:
                      scan.unknown, scan.clipped, level, message,
                      scan_building, scan_floor, scan_confidence, xy, cov,
                      scan_xy, sigma)
+
+
+def step_sigmas(before_xy, before_cov, after_xy):
+    """
+    Return how far ``after_xy`` is from ``before_xy``, in standard deviations.
+
+    The Mahalanobis distance under ``before_cov`` (2, 2): a jump of a
+    tracked position far outside its covariance is a large value.
+    """
+    delta = np.asarray(after_xy, np.float64) - before_xy
+    return float(np.sqrt(delta @ np.linalg.solve(before_cov, delta)))

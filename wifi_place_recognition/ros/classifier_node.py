@@ -4,9 +4,12 @@
 Subscribes ``wifi/scan`` (``sensor_msgs/JointState``: ``name`` = AP id,
 ``position`` = RSSI dBm) and publishes one ``diagnostic_msgs/DiagnosticArray``
 per processed scan on ``~/place`` and ``/diagnostics``, plus a 1 Hz health
-status on ``/diagnostics``; with a model that has a position output, also a
-``geometry_msgs/PoseWithCovarianceStamped`` on ``~/pose`` per answer, and
-``~/publish_initial_pose`` sends the next confident one on ``initialpose``.
+status on ``/diagnostics``; the confident place, once per change, on the
+latched ``~/current_place``. With a model that has a position output, also
+a ``geometry_msgs/PoseWithCovarianceStamped`` on ``~/pose`` per answer;
+``initialpose`` gets the next confident one after a ``~/publish_initial_pose``
+request and, with ``initial_pose_on_change``, every confident one that
+changes the building/floor or whose position jumps (:mod:`.place_changes`).
 Inference is a numpy forward pass: torch is never imported. Each scan is
 processed in the subscription callback. The subscription keeps one scan
 (KEEP_LAST, depth 1): a scan that arrives while another is processed
@@ -21,7 +24,7 @@ import sys
 import time
 from collections import Counter
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
                                 ParameterDescriptor, SetParametersResult)
@@ -32,6 +35,8 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from ..core.artifact import load_model, ModelFileError
+from .messages import key_value as _kv, pose_message, stamp_time
+from .place_changes import PlaceChanges
 from .runner import names_the_node, run
 from .sequence import PublisherGaps
 from ..core.recognizer import OK, PlaceRecognizer, WARN
@@ -41,9 +46,9 @@ from ..core.tracking import DEFAULT_TIMEOUT
 
 LEVELS = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN}
 THROTTLE_S = 5.0
-#: Variance (rad^2) of the unknown yaw, and of z, roll and pitch: WiFi
-#: gives no orientation, and the floor is given by the frame.
-UNKNOWN_VARIANCE = 1e6
+#: Parameters that :meth:`PlaceRecognizer.configure` takes, by name.
+RECOGNIZER_SETTINGS = ('min_confidence', 'min_known_aps', 'max_aps',
+                       'tracking', 'tracking_timeout')
 # Sensor-data QoS that keeps only the newest scan waiting.
 SCAN_QOS = copy.copy(qos_profile_sensor_data)
 SCAN_QOS.depth = 1
@@ -79,10 +84,6 @@ def _check_frame(template):
         raise ValueError('frame_id must not be empty')
 
 
-def _kv(key, value):
-    return KeyValue(key=key, value=str(value))
-
-
 class ClassifierNode(Node):
     """
     Thin ROS adapter around :class:`PlaceRecognizer`.
@@ -99,33 +100,33 @@ class ClassifierNode(Node):
                 description='model file from train_model; empty: the '
                             'shipped UJIIndoorLoc model',
                 read_only=True)).value or str(default_model_path())
-        min_confidence = self.declare_parameter(
+        self.declare_parameter(
             'min_confidence', 0.5, ParameterDescriptor(
                 description='below this top-class probability the status '
                             'is WARN',
                 floating_point_range=[FloatingPointRange(
-                    from_value=0.0, to_value=1.0)])).value
-        min_known_aps = self.declare_parameter(
+                    from_value=0.0, to_value=1.0)]))
+        self.declare_parameter(
             'min_known_aps', 3, ParameterDescriptor(
                 description='with fewer APs known to the model the status '
                             'is WARN',
                 integer_range=[IntegerRange(
-                    from_value=0, to_value=10000, step=1)])).value
-        max_aps = self.declare_parameter(
+                    from_value=0, to_value=10000, step=1)]))
+        self.declare_parameter(
             'max_aps', 4096, ParameterDescriptor(
                 description='scans listing more APs are rejected',
                 integer_range=[IntegerRange(
-                    from_value=1, to_value=1000000, step=1)])).value
-        tracking = self.declare_parameter(
+                    from_value=1, to_value=1000000, step=1)]))
+        self.declare_parameter(
             'tracking', False, ParameterDescriptor(
                 description='answer with the building/floor tracked over '
-                            'the scans (false: each scan alone)')).value
-        self.tracking_timeout = self.declare_parameter(
+                            'the scans (false: each scan alone)'))
+        self.declare_parameter(
             'tracking_timeout', DEFAULT_TIMEOUT, ParameterDescriptor(
                 description='seconds between scans (header.stamp) after '
                             'which the tracked belief restarts',
                 floating_point_range=[FloatingPointRange(
-                    from_value=1.0, to_value=1e6)])).value
+                    from_value=1.0, to_value=1e6)]))
         self.frame_id = self.declare_parameter(
             'frame_id', 'map', ParameterDescriptor(
                 description='frame of ~/pose and initialpose; may contain '
@@ -137,13 +138,26 @@ class ClassifierNode(Node):
                 description='at start-up, send the first confident answer '
                             'on initialpose (as the service does)',
                 read_only=True)).value
+        self.reseed_on_change = self.declare_parameter(
+            'initial_pose_on_change', False, ParameterDescriptor(
+                description='send every confident answer that changes the '
+                            'building/floor, or whose position jumps, on '
+                            'initialpose')).value
+        jump_threshold = self.declare_parameter(
+            'jump_threshold', 5.0, ParameterDescriptor(
+                description='a jump: the tracked position moved more than '
+                            'this many standard deviations of the previous '
+                            'answer\'s (Mahalanobis distance)',
+                floating_point_range=[FloatingPointRange(
+                    from_value=1.0, to_value=100.0)])).value
 
         self.model_path = model_path
         model = load_model(model_path)
         self.recognizer = PlaceRecognizer(
-            model, min_confidence, min_known_aps, max_aps,
-            make_forward(model) if make_forward else None)
-        self.recognizer.track(tracking, self.tracking_timeout)
+            model, forward=make_forward(model) if make_forward else None)
+        self.recognizer.configure(**{
+            name: self.get_parameter(name).value
+            for name in RECOGNIZER_SETTINGS})
         self.prob_keys = [f'prob/{n}' for n in
                           self.recognizer.model.class_names]
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -158,6 +172,7 @@ class ClassifierNode(Node):
             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
+        self.changes = PlaceChanges(self, jump_threshold)
         self._scan_sub = self.create_subscription(
             JointState, 'wifi/scan', self._on_scan, SCAN_QOS,
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
@@ -171,9 +186,10 @@ class ClassifierNode(Node):
                 PoseWithCovarianceStamped, 'initialpose', 1)
             self.create_service(Trigger, '~/publish_initial_pose',
                                 self._on_publish_initial_pose)
-        elif self._send_initial_pose:
-            raise ValueError('publish_initial_pose: the model has no '
-                             'position output (trained without X, Y)')
+        elif self._send_initial_pose or self.reseed_on_change:
+            raise ValueError(self._no_position('publish_initial_pose' if
+                                               self._send_initial_pose else
+                                               'initial_pose_on_change'))
         provenance = self.recognizer.model.provenance
         self.get_logger().info(
             f'model {model_path}: {len(self.recognizer.model.ap_ids)} APs, '
@@ -181,12 +197,21 @@ class ClassifierNode(Node):
             f'{provenance.get("created", "?")})')
 
     # parameters -----------------------------------------------------------
+    @staticmethod
+    def _no_position(name):
+        return (f'{name}: the model has no position output (trained '
+                f'without X, Y)')
+
     def _validate_parameters(self, params):
         for p in params:
-            if p.name in ('min_confidence', 'tracking_timeout') and \
-                    not math.isfinite(p.value):
+            if p.name in ('min_confidence', 'tracking_timeout',
+                          'jump_threshold') and not math.isfinite(p.value):
                 return SetParametersResult(
                     successful=False, reason=f'{p.name} must be finite')
+            if p.name == 'initial_pose_on_change' and p.value and \
+                    self.pose_pub is None:
+                return SetParametersResult(
+                    successful=False, reason=self._no_position(p.name))
             if p.name == 'frame_id':
                 try:
                     _check_frame(p.value)
@@ -196,21 +221,15 @@ class ClassifierNode(Node):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params):
-        for p in params:
-            if p.name == 'min_confidence':
-                self.recognizer.min_confidence = p.value
-            elif p.name == 'min_known_aps':
-                self.recognizer.min_known_aps = p.value
-            elif p.name == 'max_aps':
-                self.recognizer.mapper.max_aps = p.value
-            elif p.name == 'tracking':
-                self.recognizer.track(p.value, self.tracking_timeout)
-            elif p.name == 'tracking_timeout':
-                self.tracking_timeout = p.value
-                if self.recognizer.tracker is not None:
-                    self.recognizer.tracker.timeout = p.value
-            elif p.name == 'frame_id':
-                self.frame_id = p.value
+        values = {p.name: p.value for p in params}
+        self.recognizer.configure(**{
+            name: value for name, value in values.items()
+            if name in RECOGNIZER_SETTINGS})
+        self.frame_id = values.get('frame_id', self.frame_id)
+        self.reseed_on_change = values.get('initial_pose_on_change',
+                                           self.reseed_on_change)
+        self.changes.jump_threshold = values.get(
+            'jump_threshold', self.changes.jump_threshold)
 
     def _on_publish_initial_pose(self, request, response):
         self._send_initial_pose = True
@@ -244,42 +263,50 @@ class ClassifierNode(Node):
         self._process(msg, received_at)
 
     def _process(self, msg, received_at):
+        stamp = msg.header.stamp
         status = DiagnosticStatus(name=self.status_name,
                                   hardware_id=msg.header.frame_id)
         try:
             place = self.recognizer.classify(
-                msg.name, msg.position, self._scan_time(msg.header.stamp))
+                msg.name, msg.position, stamp_time(stamp, self.get_clock()))
         except ScanRejected as exc:
-            self._reject(status, exc.reason, str(exc))
+            self._reject(status, exc.reason, str(exc), stamp)
+            return
         except Exception as exc:  # never let one scan stop the node
-            self._reject(status, 'internal_error', repr(exc))
-        else:
-            status.level = LEVELS[place.level]
-            status.message = place.message
-            latency_ms = (time.perf_counter() - received_at) * 1e3
-            status.values = [
-                _kv('building', place.building), _kv('floor', place.floor),
-                _kv('confidence', f'{place.confidence:.6f}'),
-                _kv('scan_building', place.scan_building),
-                _kv('scan_floor', place.scan_floor),
-                _kv('scan_confidence', f'{place.scan_confidence:.6f}'),
-                _kv('known_aps', place.known_aps),
-                _kv('unknown_aps', place.unknown_aps),
-                _kv('clipped_rssi', place.clipped),
-                _kv('latency_ms', f'{latency_ms:.3f}'),
-            ] + [_kv(k, f'{p:.6f}') for k, p in
-                 zip(self.prob_keys, place.probabilities)]
-            if place.position is not None:
-                status.values += self._position_values(place)
-            self.last_latency_ms = latency_ms
-            self.counts['answered'] += 1
+            self._reject(status, 'internal_error', repr(exc), stamp)
+            return
+        status.level = LEVELS[place.level]
+        status.message = place.message
+        latency_ms = (time.perf_counter() - received_at) * 1e3
+        status.values = [
+            _kv('building', place.building), _kv('floor', place.floor),
+            _kv('confidence', f'{place.confidence:.6f}'),
+            _kv('scan_building', place.scan_building),
+            _kv('scan_floor', place.scan_floor),
+            _kv('scan_confidence', f'{place.scan_confidence:.6f}'),
+            _kv('known_aps', place.known_aps),
+            _kv('unknown_aps', place.unknown_aps),
+            _kv('clipped_rssi', place.clipped),
+            _kv('latency_ms', f'{latency_ms:.3f}'),
+        ] + [_kv(k, f'{p:.6f}') for k, p in
+             zip(self.prob_keys, place.probabilities)]
+        if place.position is not None:
+            status.values += self._position_values(place)
+        self.last_latency_ms = latency_ms
+        self.counts['answered'] += 1
+        self._publish_answer(status, stamp)
+        confident = status.level == DiagnosticStatus.OK
+        reasons = self.changes.follow(place, confident, stamp,
+                                      self._frame(place))
+        if place.position is not None:
+            self._publish_pose(place, stamp, confident,
+                               reasons if self.reseed_on_change else [])
+
+    def _publish_answer(self, status, stamp):
         out = DiagnosticArray(status=[status])
-        out.header.stamp = msg.header.stamp
+        out.header.stamp = stamp
         self.place_pub.publish(out)
         self.diag_pub.publish(out)
-        if status.level != DiagnosticStatus.ERROR and \
-                place.position is not None:
-            self._publish_pose(place, msg.header.stamp, status.level)
 
     @staticmethod
     def _position_values(place):
@@ -290,42 +317,33 @@ class ClassifierNode(Node):
                 _kv('scan_y', f'{place.scan_position[1]:.3f}'),
                 _kv('scan_sigma_m', f'{place.scan_sigma:.3f}')]
 
-    def _publish_pose(self, place, stamp, level):
-        pose = PoseWithCovarianceStamped()
-        pose.header.stamp = stamp
-        pose.header.frame_id = self.frame_id.format(building=place.building,
-                                                    floor=place.floor)
-        pose.pose.pose.position.x = float(place.position[0])
-        pose.pose.pose.position.y = float(place.position[1])
-        pose.pose.pose.orientation.w = 1.0
-        covariance = [0.0] * 36
-        (covariance[0], covariance[1]), (covariance[6], covariance[7]) = \
-            place.position_cov.tolist()
-        for i in (14, 21, 28, 35):  # z, roll, pitch, yaw: unknown
-            covariance[i] = UNKNOWN_VARIANCE
-        pose.pose.covariance = covariance
+    def _frame(self, place):
+        return self.frame_id.format(building=place.building,
+                                    floor=place.floor)
+
+    def _publish_pose(self, place, stamp, confident, reasons):
+        pose = pose_message(place.position, place.position_cov, stamp,
+                            self._frame(place))
         self.pose_pub.publish(pose)
-        if self._send_initial_pose and level == DiagnosticStatus.OK:
+        if confident and self._send_initial_pose:
             self._send_initial_pose = False
+            reasons = reasons + ['requested']
+        if reasons:
             self.initial_pose_pub.publish(pose)
             self.get_logger().info(
-                f'initialpose sent: building {place.building}, floor '
-                f'{place.floor}, x {place.position[0]:.2f}, y '
-                f'{place.position[1]:.2f} in {pose.header.frame_id} '
-                f'(sigma {place.position_sigma:.1f} m)')
+                f'initialpose sent ({"; ".join(reasons)}): building '
+                f'{place.building}, floor {place.floor}, x '
+                f'{place.position[0]:.2f}, y {place.position[1]:.2f} in '
+                f'{pose.header.frame_id} (sigma {place.position_sigma:.1f} '
+                f'm)')
 
-    def _scan_time(self, stamp):
-        """Return the scan's time (s): its stamp, or now when unset."""
-        if stamp.sec or stamp.nanosec:
-            return stamp.sec + stamp.nanosec * 1e-9
-        return self.get_clock().now().nanoseconds * 1e-9
-
-    def _reject(self, status, reason, detail):
+    def _reject(self, status, reason, detail, stamp):
         self.counts['rejected'] += 1
         self.counts[f'rejected/{reason}'] += 1
         status.level = DiagnosticStatus.ERROR
         status.message = f'scan rejected: {detail}'
         status.values = [_kv('reason', reason)]
+        self._publish_answer(status, stamp)
         self.get_logger().warn(f'scan rejected: {detail}',
                                throttle_duration_sec=THROTTLE_S)
 

@@ -1,7 +1,13 @@
 """Conversions between ROS messages and plain Python values."""
 
+from diagnostic_msgs.msg import KeyValue
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from sensor_msgs.msg import JointState
 import numpy as np
+
+#: Variance (rad^2) of the unknown yaw, and of z, roll and pitch: WiFi
+#: gives no orientation, and the floor is given by the frame.
+UNKNOWN_VARIANCE = 1e6
 
 
 def seconds(stamp):
@@ -12,6 +18,28 @@ def seconds(stamp):
 def stamp_time(stamp, clock):
     """Return a header stamp in seconds; an unset (zero) one: ``clock``'s now."""
     return seconds(stamp) or clock.now().nanoseconds * 1e-9
+
+
+def key_value(key, value):
+    """Return a KeyValue of ``value`` as text."""
+    return KeyValue(key=key, value=str(value))
+
+
+def pose_message(xy, cov, stamp, frame_id):
+    """Return a PoseWithCovarianceStamped at x, y with their 2x2 ``cov``."""
+    pose = PoseWithCovarianceStamped()
+    pose.header.stamp = stamp
+    pose.header.frame_id = frame_id
+    pose.pose.pose.position.x = float(xy[0])
+    pose.pose.pose.position.y = float(xy[1])
+    pose.pose.pose.orientation.w = 1.0
+    covariance = [0.0] * 36
+    (covariance[0], covariance[1]), (covariance[6], covariance[7]) = \
+        np.asarray(cov, float).tolist()
+    for i in (14, 21, 28, 35):  # z, roll, pitch, yaw: unknown
+        covariance[i] = UNKNOWN_VARIANCE
+    pose.pose.covariance = covariance
+    return pose
 
 
 def status_values(status):
