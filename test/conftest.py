@@ -107,10 +107,11 @@ def synthetic_csv(path, scans_per_class=60, n_aps=24, seed=0, phones=4,
 
 
 def surveyed_csv(path, scans_per_floor=200, n_aps=30, seed=0, phones=4,
-                 scans_seed=None):
+                 scans_seed=None, floors=(0, 1)):
     """
     Write a generic CSV with X, Y: one building, 2 floors of 40 m x 40 m.
 
+    ``floors`` chooses which of the two floors are surveyed.
     APs stand at random places on either floor; RSSI falls with distance
     (log-distance path loss, 12 dB more through the floor), so the
     position can be learned from the scan. ``seed`` draws the building,
@@ -123,7 +124,7 @@ def surveyed_csv(path, scans_per_floor=200, n_aps=30, seed=0, phones=4,
         rng = np.random.default_rng(scans_seed)
     lines = [','.join([mac(i) for i in range(n_aps)]
                       + ['X', 'Y', 'FLOOR', 'BUILDINGID', 'PHONEID'])]
-    for floor in (0, 1):
+    for floor in floors:
         for s in range(scans_per_floor):
             xy = rng.uniform(0, 40, 2)
             d = np.linalg.norm(ap_xy - xy, axis=1) + 1.0

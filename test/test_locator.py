@@ -7,14 +7,15 @@ import pytest
 from wifi_place_recognition.core.artifact import (load_model,
                                                   ModelFileError, save_model)
 from wifi_place_recognition.core.locator import Locator
+from wifi_place_recognition.core.preprocessing import signal
 
 
 def _references(rng, n=300, n_aps=40, n_classes=3):
-    inputs = np.where(rng.random((n, n_aps)) < 0.2,
-                      rng.normal(1.0, 0.5, (n, n_aps)), 0.0)
+    rssi = np.where(rng.random((n, n_aps)) < 0.2,
+                    rng.uniform(-100, -40, (n, n_aps)), np.nan)
     classes = rng.integers(0, n_classes, n)
     xy = rng.uniform(-7700, -7600, (n, 2)) + [0, 4864900]
-    return inputs.astype(np.float32), classes, xy
+    return rssi.astype(np.float32), classes, xy
 
 
 def _stored(locator, c):
@@ -27,22 +28,37 @@ def _stored(locator, c):
     return out
 
 
-def test_locate_is_distance_weighted_knn_within_the_class():
+@pytest.mark.parametrize('representation, metric', [
+    ('positive', 'euclidean'), ('powed', 'sorensen'),
+    ('exponential', 'euclidean'), ('positive', 'sorensen')])
+def test_locate_is_distance_weighted_knn_within_the_class(representation,
+                                                          metric):
     rng = np.random.default_rng(0)
-    inputs, classes, xy = _references(rng)
-    locator = Locator.build(inputs, classes, xy, 3, neighbours=4,
-                            sigma=[1.0, 2.0, 3.0])
+    rssi, classes, xy = _references(rng)
+    for c in range(3):                  # class c never detects AP c
+        rssi[classes == c, c] = np.nan
+    locator = Locator.build(rssi, classes, xy, 3, neighbours=4,
+                            sigma=[1.0, 2.0, 3.0],
+                            representation=representation, metric=metric)
+    values = signal(rssi, representation)
     for c in range(3):  # int8 references: within half a step of each row
         stored = _stored(locator, c)
-        step = np.abs(inputs[classes == c]).max(axis=0) / 127
-        assert (np.abs(stored - inputs[classes == c]) <=
+        step = np.abs(values[classes == c]).max(axis=0) / 127
+        assert (np.abs(stored - values[classes == c]) <=
                 step / 2 * 1.001 + 1e-7).all()
     for _ in range(20):
-        query = np.where(rng.random(40) < 0.3, rng.normal(1, 0.5, 40), 0.0)
-        columns = np.flatnonzero(query)
+        query = np.where(rng.random(40) < 0.3, rng.uniform(-100, -40, 40),
+                         np.nan).astype(np.float32)
+        query[:3] = -70.0               # an AP its class never detects
+        columns = np.flatnonzero(~np.isnan(query))
+        q = signal(query, representation)
         c = int(rng.integers(0, 3))
         mine = np.flatnonzero(classes == c)
-        distance = np.linalg.norm(_stored(locator, c) - query, axis=1)
+        refs = _stored(locator, c)
+        if metric == 'euclidean':
+            distance = np.linalg.norm(refs - q, axis=1)
+        else:
+            distance = np.abs(refs - q).sum(axis=1) / (refs + q).sum(axis=1)
         nearest = np.argsort(distance)[:4]
         weight = 1 / distance[nearest]
         expected = weight @ xy[mine[nearest]] / weight.sum()
@@ -58,10 +74,12 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
     inputs, classes, xy = _references(rng, n_aps=len(model.ap_ids),
                                       n_classes=len(model.classes))
     model.position = Locator.build(inputs, classes, xy, len(model.classes),
-                                   5, np.ones(len(model.classes)))
+                                   5, np.ones(len(model.classes)),
+                                   representation='powed', metric='sorensen')
     save_model(model, tmp_path / 'm.npz')
     loaded = load_model(tmp_path / 'm.npz').position
     np.testing.assert_array_equal(loaded.origin, model.position.origin)
+    assert (loaded.representation, loaded.metric) == ('powed', 'sorensen')
     for name in ('class_start', 'ap_start', 'ap_column', 'scale', 'codes',
                  'norms', 'xy', 'sigma'):
         np.testing.assert_array_equal(getattr(loaded, name),
@@ -80,6 +98,11 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
         with pytest.raises(ModelFileError, match=message):
             load_model(tmp_path / 'bad.npz')
     bad = replace(model.position)
+    bad.metric = 'manhattan'
+    save_model(replace(model, position=bad), tmp_path / 'bad.npz')
+    with pytest.raises(ModelFileError, match='metric one of'):
+        load_model(tmp_path / 'bad.npz')
+    bad = replace(model.position)
     bad.ap_column = bad.ap_column[:, None]
     save_model(replace(model, position=bad), tmp_path / 'bad.npz')
     with pytest.raises(ModelFileError, match='wrong shape'):
@@ -88,19 +111,20 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
 
 def test_empty_classes_and_scans_sharing_no_ap():
     rng = np.random.default_rng(2)
-    inputs, classes, xy = _references(rng, n_classes=2)
-    inputs[classes == 1] = 0.0          # class 1 detects nothing
-    inputs[classes == 0, -1] = 0.0      # and class 0 never the last AP
-    locator = Locator.build(inputs, classes, xy, 4, sigma=np.ones(4))
-    query = np.zeros(40)
-    query[:3] = 1.0
-    columns = np.flatnonzero(query)
+    rssi, classes, xy = _references(rng, n_classes=2)
+    rssi[classes == 1] = np.nan         # class 1 detects nothing
+    rssi[classes == 0, -1] = np.nan     # and class 0 never the last AP
+    locator = Locator.build(rssi, classes, xy, 4, sigma=np.ones(4))
+    query = np.full(40, np.nan, np.float32)
+    query[:3] = -109.0                  # a positive signal of 1
+    columns = np.flatnonzero(~np.isnan(query))
     for c in (2, 3):                    # no reference at all
         got, sigma = locator.locate(columns, query[columns], c)
         assert np.isnan(got).all() and np.isnan(sigma)
     # every reference of class 1 is at the same distance: |query|
-    np.testing.assert_allclose(locator.distances(columns, query[columns], 1),
-                               np.sqrt(3.0), rtol=1e-6)
+    np.testing.assert_allclose(
+        locator.distances(columns, signal(query[columns], 'positive'), 1),
+        np.sqrt(3.0), rtol=1e-6)
     got, _ = locator.locate(columns, query[columns], 1)
     assert np.isfinite(got).all()
     # a scan sharing no AP with class 0: |query|^2 + |reference|^2

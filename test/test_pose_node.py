@@ -1,5 +1,7 @@
 """Position over real ROS: ~/pose, per-floor frames, initialpose service."""
 
+import json
+
 from conftest import FAST, python_module, run, surveyed_csv, wait_until
 from geometry_msgs.msg import PoseWithCovarianceStamped
 import numpy as np
@@ -109,3 +111,32 @@ def test_publish_initial_pose_sends_the_next_confident_answer_once(
         assert len(poses.initial) == 1
         assert poses.initial[0].header.stamp.sec == stamp
         assert poses.initial[0].header.frame_id == 'map'
+
+
+def test_one_floor_survey_makes_a_position_only_model(ros, tmp_path):
+    one = surveyed_csv(tmp_path / 'one.csv', floors=(1,))
+    model = tmp_path / 'one.npz'
+    result = run(python_module('cli.train_model', '--data', one, '-o', model,
+                               *FAST))
+    assert result.returncode == 0, result.stderr
+    assert 'position only (one class)' in result.stdout
+    test = surveyed_csv(tmp_path / 'test.csv', floors=(1,), scans_seed=1,
+                        scans_per_floor=10)
+    result = run(python_module('cli.evaluate_model', '--model', model,
+                               '--data', test, '--json'))
+    assert result.returncode == 0, result.stderr
+    figures = json.loads(result.stdout)
+    assert figures['building_floor_accuracy'] == 1.0
+    assert figures['position_mean_error_m'] < 10.0
+    fp = read_fingerprints(test)
+    with running_node(ros, tmp_path, model, 'one_node', '-p',
+                      'tracking:=false') as (client, proc, loaded):
+        poses = Poses(ros, 'one_node')
+        assert wait_until(lambda: poses.subs[0].get_publisher_count(), 30,
+                          ros)
+        for row in range(3):
+            stamp, values = _send(client, fp, row)
+            assert (values['building'], values['floor']) == ('0', '1')
+            assert float(values['confidence']) == 1.0
+            assert wait_until(lambda: any(
+                p.header.stamp.sec == stamp for p in poses.pose), 30, ros)

@@ -81,19 +81,26 @@ def main(argv=None):
     print(train_fp.summary(), file=sys.stderr, flush=True)
     model, _, report = _trainer()(train_fp, config, log, validation_fp)
     save_model(model, args.output)
+    networks = f'{len(model.members)} network(s) of {report.epochs} ' \
+        f'epochs' if model.members else 'position only (one class)'
     print(f'wrote {args.output}: {len(model.ap_ids)} APs, '
-          f'{len(model.classes)} classes, {len(model.members)} network(s) '
-          f'of {report.epochs} epochs, trained in {report.seconds:.1f} s '
-          f'({report.dropped_empty} scans without any AP left out)')
+          f'{len(model.classes)} classes, {networks}, trained in '
+          f'{report.seconds:.1f} s ({report.dropped_empty} scans without '
+          f'any AP left out)')
     s = report.selection
-    if s.get('grouping') == 'validation':
-        print(f'validation data {s["note"]}: building+floor '
-              f'{s["accuracy_mean"]:.4f} at {report.epochs} epochs')
-    elif s:
-        print(f'cross-validated ({len(s["folds"])} folds of whole '
-              f'{s["grouping"]} groups): building+floor '
-              f'{s["accuracy_mean"]:.4f} ({s["accuracy_min"]:.4f}-'
-              f'{s["accuracy_max"]:.4f} over folds)')
+    where = f'validation data {s.get("note")}' \
+        if s.get('grouping') == 'validation' else \
+        f'cross-validated ({len(s.get("folds", []))} folds of whole ' \
+        f'{s.get("grouping")} groups)'
+    if 'accuracy_mean' in s:
+        print(f'{where}: building+floor {s["accuracy_mean"]:.4f} '
+              f'({s["accuracy_min"]:.4f}-{s["accuracy_max"]:.4f} over '
+              f'folds) at {report.epochs} epochs')
+    if 'position_mean_error_m' in s:
+        print(f'{where}: position mean error '
+              f'{s["position_mean_error_m"]:.2f} m ({s["position_metric"]} '
+              f'distance over the {s["position_representation"]} signal, '
+              f'k={s["neighbours"]})')
     if test_fp is not None:
         print_report(evaluate(model, test_fp), model, test_fp.source)
     return 0

@@ -17,13 +17,15 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_write
-from .locator import LEVELS, Locator
+from .locator import LEVELS, Locator, METRICS
 from .model import ACTIVATIONS, Layer, PlaceModel
-from .preprocessing import RssiScaler
+from .preprocessing import RssiScaler, SIGNALS
 from .tracking import TrackingParams
 
 FORMAT = 'wifi_place_recognition/model'
-SCHEMA_VERSION = 2     # 2: the locator's references as int8 blocks
+#: 2: the locator's references as int8 blocks; 3: the locator's own signal
+#: representation and distance, and position-only (one-class) models.
+SCHEMA_VERSION = 3
 MAX_FILE_BYTES = 256 << 20
 MAX_UNPACKED_BYTES = 1 << 30
 #: The locator's arrays in the file (all float32: indices below 2**24 and
@@ -69,7 +71,9 @@ def save_model(model, path):
                                                     np.float32)
         header['position'] = {'origin': [float(v) for v in pos.origin],
                               'neighbours': pos.neighbours,
-                              'columns': list(pos.columns), 'units': 'm'}
+                              'columns': list(pos.columns), 'units': 'm',
+                              'representation': pos.representation,
+                              'metric': pos.metric}
     unpacked = sum(a.nbytes for a in arrays.values())
     if unpacked > MAX_UNPACKED_BYTES:
         raise ValueError(f'the model would unpack to {unpacked} bytes, more '
@@ -190,14 +194,18 @@ def _build(header, arrays):
                                  f'{len(ap_ids)} APs')
     members = [_layers(specs, arrays, len(ap_ids), len(classes))
                for specs in header['members']]
-    if not members:
+    if not members and len(classes) > 1:
         raise ModelFileError('the model has no network')
     if len({tuple((layer.weight.shape, layer.activation) for layer in m)
             for m in members}) > 1:
         raise ModelFileError('the networks of the ensemble differ in shape')
+    position = _position(header, arrays, len(ap_ids), len(classes))
+    if not members and position is None:
+        raise ModelFileError('a one-class model without a network must have '
+                             'a position output')
     return PlaceModel(ap_ids, scaler, members, classes,
                       header.get('provenance', {}), _tracking(header),
-                      _position(header, arrays, len(ap_ids), len(classes)))
+                      position)
 
 
 def _tracking(header):
@@ -223,6 +231,10 @@ def _position(header, arrays, n_aps, n_classes):
         raise ModelFileError('position: origin must be two finite numbers, '
                              'neighbours a positive integer and columns two '
                              'names')
+    if spec['representation'] not in SIGNALS or \
+            spec['metric'] not in METRICS:
+        raise ModelFileError(f'position: representation must be one of '
+                             f'{SIGNALS} and metric one of {METRICS}')
     a = {name: arrays[f'position.{name}'] for name in LOCATOR_ARRAYS}
     if not all(np.isfinite(v).all() for v in a.values()) or \
             not all((a[i] == np.round(a[i])).all() and (a[i] >= 0).all()
@@ -258,7 +270,8 @@ def _position(header, arrays, n_aps, n_classes):
         raise ModelFileError('position: sigma must be > 0 and scales >= 0')
     return Locator(origin, class_start, ap_start, ap_column, a['scale'],
                    a['codes'].astype(np.int8), a['norms'], a['xy'],
-                   a['sigma'], n_aps, k, tuple(columns))
+                   a['sigma'], n_aps, k, tuple(columns),
+                   spec['representation'], spec['metric'])
 
 
 def _layers(specs, arrays, n_inputs, n_outputs):

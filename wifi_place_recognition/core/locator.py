@@ -2,20 +2,26 @@
 Position from one scan: k-NN among the recognised floor's reference scans.
 
 Distance-weighted k-NN among the reference scans of the building/floor the
-classifier recognised. References live in the model's input space,
-relative to a scan that detects nothing (where every representation and
-scaling puts an undetected AP at a constant), so a scan is sparse: only
-its detected APs are non-zero. Each class keeps a dense block over the APs
-its references detect, one row per AP, quantised to int8 with a scale per
-row (a step of 1/127 of the row's largest value; the distances are those
-of the quantised references): a query reads the rows of its own APs, a
-few dozen contiguous rows, in one matrix-vector product. Coordinates are
-kept relative to a float64 origin.
+classifier recognised, in a non-negative signal representation
+(:func:`.preprocessing.signal`: 0 for an undetected AP, so a scan is
+sparse) with a Euclidean or Sorensen (Bray-Curtis) distance; training
+chooses both, and k, by cross-validation. Each class keeps a dense block
+over the APs its references detect, one row per AP, quantised to int8 with
+a scale per row (a step of 1/127 of the row's largest value; the distances
+are those of the quantised references): a query reads the rows of its own
+APs, a few dozen contiguous rows. Coordinates are kept relative to a
+float64 origin.
 """
 
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .preprocessing import signal, SIGNALS
+
+#: Distances the k-NN can use: Euclidean, or Sorensen (Bray-Curtis),
+#: sum |q - r| / sum (q + r).
+METRICS = ('euclidean', 'sorensen')
 
 #: Radius of the 95 % circle of a 2-D isotropic Gaussian, in sigmas.
 R95 = float(np.sqrt(-2 * np.log(0.05)))
@@ -38,17 +44,24 @@ class Locator:
     ap_column: np.ndarray  # int64: the model AP column of each row
     scale: np.ndarray     # float32: per row, reference input = code * scale
     codes: np.ndarray     # int8: class by class, (rows, references) blocks
-    norms: np.ndarray     # float32 (n_refs,): squared norm of each reference
+    norms: np.ndarray     # float32 (n_refs,): squared L2 norm (euclidean)
+    #                       or L1 norm (sorensen) of each reference
     xy: np.ndarray        # float32 (n_refs, 2): position - origin
     sigma: np.ndarray     # float32 (k,)
     n_aps: int            # width of the model's AP vector
     neighbours: int = 5
     columns: tuple = ('X', 'Y')
+    representation: str = 'positive'  # one of preprocessing.SIGNALS
+    metric: str = 'euclidean'         # one of METRICS
     blocks: list = field(init=False, repr=False)   # views into codes
     row_of: np.ndarray = field(init=False, repr=False)  # (k, n_aps), -1
 
     def __post_init__(self):
         """Index the blocks: each class's rows by model AP column."""
+        if self.representation not in SIGNALS or self.metric not in METRICS:
+            raise ValueError(f'representation must be one of {SIGNALS} and '
+                             f'metric one of {METRICS}, not '
+                             f'{self.representation!r}, {self.metric!r}')
         k = len(self.class_start) - 1
         refs = np.diff(self.class_start)
         rows = np.diff(self.ap_start)
@@ -62,13 +75,15 @@ class Locator:
                 np.arange(rows[c])
 
     @classmethod
-    def build(cls, inputs, classes, xy, n_classes, neighbours=5,
-              sigma=None, columns=('X', 'Y')):
+    def build(cls, rssi, classes, xy, n_classes, neighbours=5,
+              sigma=None, columns=('X', 'Y'), representation='positive',
+              metric='euclidean'):
         """
-        Return a locator of reference ``inputs`` (relative, (n, n_aps)).
+        Return a locator of reference scans ``rssi`` (dBm, NaN: undetected).
 
         ``classes`` is each reference's class index, ``xy`` its position.
         """
+        inputs = signal(rssi, representation)
         order = np.argsort(classes, kind='stable')
         inputs, classes, xy = inputs[order], classes[order], xy[order]
         origin = xy.mean(axis=0)
@@ -84,7 +99,8 @@ class Locator:
             aps.append(detected)
             scales.append(scale)
             codes.append(code.ravel())
-            norms.append(((code * scale[:, None].astype(np.float64)) ** 2)
+            stored = code * scale[:, None].astype(np.float64)
+            norms.append((stored ** 2 if metric == 'euclidean' else stored)
                          .sum(axis=0))
         if sigma is None:
             sigma = np.full(n_classes, np.nan)
@@ -95,28 +111,40 @@ class Locator:
                    np.concatenate(norms).astype(np.float32),
                    (xy - origin).astype(np.float32),
                    np.asarray(sigma, np.float32), inputs.shape[1],
-                   int(neighbours), tuple(columns))
+                   int(neighbours), tuple(columns), representation, metric)
 
-    def locate(self, columns, values, c, neighbours=None):
+    def locate(self, columns, rssi, c, neighbours=None):
         """
         Return (xy metres (2,), sigma m) of one scan of class ``c``.
 
-        ``columns``/``values``: the scan's detected APs and their relative
-        inputs; ``neighbours`` overrides the model's k.
+        ``columns``/``rssi``: the scan's detected APs and their readings
+        (dBm); ``neighbours`` overrides the model's k.
         """
-        return self.weighted(self.distances(columns, values, c),
-                             neighbours or self.neighbours, c)
+        return self.weighted(
+            self.distances(columns, signal(rssi, self.representation), c),
+            neighbours or self.neighbours, c)
 
     def distances(self, columns, values, c):
-        """Return the distance of one scan to each reference of class c."""
+        """
+        Return the distance of one scan to each reference of class c.
+
+        ``values``: the signal (:attr:`representation`) of the scan's
+        detected AP ``columns``.
+        """
         first, last = self.class_start[c], self.class_start[c + 1]
         if first == last:
             return np.empty(0)
         rows = self.row_of[c, columns]
         shared = rows >= 0
         rows = rows[shared]
-        query = values[shared] * self.scale[self.ap_start[c] + rows]
-        dots = query @ self.blocks[c][rows].astype(np.float32)
+        scale = self.scale[self.ap_start[c] + rows]
+        if self.metric == 'sorensen':
+            refs = self.blocks[c][rows] * scale[:, None]
+            common = np.minimum(refs, values[shared, None]).sum(axis=0)
+            total = self.norms[first:last] + float(values.sum())
+            return 1.0 - 2.0 * common / np.maximum(total, 1e-12)
+        dots = (values[shared] * scale) @ \
+            self.blocks[c][rows].astype(np.float32)
         return np.sqrt(np.maximum(
             self.norms[first:last] + float(np.dot(values, values))
             - 2 * dots, 0.0))

@@ -55,7 +55,9 @@ class PlaceModel:
     Scaler + networks of dense layers + softmax over (building, floor).
 
     ``members`` holds one or more networks (lists of :class:`Layer`); the
-    probabilities are the mean of their softmax outputs.
+    probabilities are the mean of their softmax outputs. A model of one
+    class has no network (``members`` empty): every scan is that class,
+    with probability 1, and the model is there for its position output.
     """
 
     ap_ids: tuple
@@ -79,6 +81,11 @@ class PlaceModel:
         these arrays).
         """
         self.blank = self.scaler.blank()
+        if not self.members:
+            if len(self.classes) != 1:
+                raise ValueError('a model of several classes needs a network')
+            self.first_t = np.zeros((len(self.ap_ids), 0), np.float32)
+            return
         firsts = [layers[0] for layers in self.members]
         width = firsts[0].weight.shape[0]
         if any(layer.weight.shape[0] != width for layer in firsts):
@@ -90,7 +97,10 @@ class PlaceModel:
 
     def predict_proba(self, rssi):
         """Return class probabilities, shape (n, k), for (n, n_aps) RSSI."""
-        return mean_softmax([_run(self._inputs(rssi), layers)
+        inputs = self._inputs(rssi)
+        if not self.members:
+            return np.ones((len(inputs), 1))
+        return mean_softmax([_run(inputs, layers)
                              for layers in self.members])
 
     def _inputs(self, rssi):
@@ -138,7 +148,8 @@ class PlaceModel:
         xy = np.empty((len(best), 2))
         sigma = np.empty(len(best))
         for i, (row, c) in enumerate(zip(np.asarray(rssi, np.float32), best)):
-            xy[i], sigma[i] = self.position.locate(*self.sparse(row), c)
+            columns = np.flatnonzero(~np.isnan(row))
+            xy[i], sigma[i] = self.position.locate(columns, row[columns], c)
         return proba, xy, sigma
 
     @property
@@ -163,6 +174,9 @@ class ScanForward:
     def __init__(self, model):
         self.model = model
         members = model.members
+        if not members:     # one class: nothing to compute
+            self.rest = None
+            return
         first = [layers[0] for layers in members]
         self.width = first[0].weight.shape[0]
         self.first_t = model.first_t    # one gather, one product
@@ -187,6 +201,8 @@ class ScanForward:
         ``columns``, ``inputs``: its detected APs, from
         :meth:`PlaceModel.relative` or :meth:`PlaceModel.sparse`.
         """
+        if self.rest is None:
+            return np.ones(1)
         x = self.first_act(self.first_bias + inputs @ self.first_t[columns])
         x = x.reshape(self.shape)
         for weight_t, bias, activation in self.rest:

@@ -9,6 +9,23 @@ SCALINGS = ('joint', 'independent')
 #: (exp((dBm - floor) / 24) - 1) / (exp(-floor / 24) - 1), with floor =
 #: ``not_detected``.
 REPRESENTATIONS = ('dbm', 'powed', 'exponential')
+#: Non-negative signals (0 = not detected) the position k-NN can compare:
+#: ``positive`` = dBm - floor, and the two above.
+SIGNALS = ('positive', 'powed', 'exponential')
+
+
+def signal(rssi, representation, floor=-110.0):
+    """Return float32 ``rssi`` (NaN = not detected) as a non-negative signal."""
+    if representation not in SIGNALS:
+        raise ValueError(f'signal representation must be one of {SIGNALS}, '
+                         f'not {representation!r}')
+    floor = np.float32(floor)
+    above = np.fmax(np.asarray(rssi, np.float32) - floor, np.float32(0.0))
+    if representation == 'positive':
+        return above
+    if representation == 'powed':
+        return (above / -floor) ** np.float32(np.e)
+    return (np.expm1(above / 24) / np.expm1(-floor / 24)).astype(np.float32)
 
 
 class NotFittedError(ValueError, AttributeError):
@@ -45,13 +62,7 @@ class RssiScaler:
         if self.representation == 'dbm':
             return np.where(np.isnan(rssi), np.float32(self.not_detected),
                             rssi)
-        floor = np.float32(self.not_detected)
-        above = np.fmax(rssi - floor, np.float32(0.0))  # NaN and below: 0
-        if self.representation == 'powed':
-            out = (above / -floor) ** np.float32(np.e)
-        else:
-            out = np.expm1(above / 24) / np.expm1(-floor / 24)
-        return out.astype(np.float32)
+        return signal(rssi, self.representation, self.not_detected)
 
     def fit(self, rssi):
         """Learn mean and std from training scans."""

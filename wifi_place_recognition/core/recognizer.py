@@ -105,7 +105,7 @@ class PlaceRecognizer:
         xy = cov = None
         sigma = float('nan')
         if self.model.position is not None:
-            xy, sigma = self.model.position.locate(columns, inputs, best)
+            xy, sigma = self.model.position.locate(columns, scan.rssi, best)
             cov = np.eye(2) * sigma ** 2
         scan_xy = xy
         if self.tracker is None or time is None:

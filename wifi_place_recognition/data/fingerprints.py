@@ -293,9 +293,9 @@ def check_trainable(fp, min_scans=2):
     """
     Raise :class:`DataError` unless ``fp`` can train a classifier.
 
-    Needs scans that detect an AP, at least two building/floor classes, and
-    ``min_scans`` scans per class (a class with one scan is usually a typo
-    in a label).
+    Needs scans that detect an AP, at least two building/floor classes (or
+    one with positions: a position-only model), and ``min_scans`` scans per
+    class (a class with one scan is usually a typo in a label).
     """
     rows = np.flatnonzero(~fp.empty_rows)
     if not len(rows):
@@ -303,10 +303,12 @@ def check_trainable(fp, min_scans=2):
     classes, labels = class_index(fp.building[rows], fp.floor[rows])
     _, first, counts = np.unique(labels, return_index=True,
                                  return_counts=True)
-    if len(classes) < 2:
+    if len(classes) < 2 and fp.position is None:
         raise DataError(f'{fp.source}: only one building/floor class '
                         f'(building {classes[0][0]}, floor '
-                        f'{classes[0][1]}); need at least two')
+                        f'{classes[0][1]}) and no positions: a classifier '
+                        f'needs at least two classes, a one-class '
+                        f'(position-only) model needs X, Y columns')
     for (building, floor), i, count in zip(classes, first, counts):
         if count < min_scans:
             raise DataError(

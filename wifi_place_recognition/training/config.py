@@ -1,9 +1,17 @@
 """Every choice that shapes a trained model, checked before training starts."""
 
+import math
 from dataclasses import dataclass
 
+from ..core.locator import METRICS
+from ..core.preprocessing import SIGNALS
+
 ACTIVATION_NAMES = ('relu', 'elu', 'tanh')
-GROUPINGS = ('auto', 'device', 'walk', 'time', 'none')
+GROUPINGS = ('auto', 'device', 'walk', 'time')
+#: batch_size 0: about this many optimiser steps per epoch, in powers of
+#: two between these bounds (UJIIndoorLoc and WiFine: 512).
+STEPS_PER_EPOCH = 20
+BATCH_BOUNDS = (32, 512)
 
 
 @dataclass
@@ -32,9 +40,11 @@ class TrainConfig:
     augment_dropout: float = 0.1  # probability to drop a detected AP
     sae_epochs: int = 10
     epochs: int = 20              # the most; cross-validation picks fewer
-    batch_size: int = 512
+    batch_size: int = 0           # 0: from the number of scans
     learning_rate: float = 3e-3
     neighbours: int = 0           # k of the position k-NN; 0: by the folds
+    position_representation: str = ''  # signal of the k-NN; '': by folds
+    position_metric: str = ''     # distance of the k-NN; '': by the folds
     folds: int = 4                # cross-validation folds; 0: no selection
     grouping: str = 'auto'        # what a fold holds out (see selection)
     ensemble: int = 3
@@ -59,8 +69,15 @@ class TrainConfig:
             (self.grouping in GROUPINGS,
              f'grouping must be one of {GROUPINGS}'),
             (self.ensemble >= 1, 'ensemble must be at least 1'),
-            (self.batch_size >= 1 and self.learning_rate > 0,
-             'batch size and learning rate must be positive'),
+            (self.batch_size >= 0 and self.learning_rate > 0,
+             'batch size must be >= 0 (0: from the data) and learning rate '
+             'positive'),
+            (self.position_representation in ('',) + SIGNALS,
+             f'position_representation must be one of {SIGNALS} '
+             f'(or empty: chosen by the folds)'),
+            (self.position_metric in ('',) + METRICS,
+             f'position_metric must be one of {METRICS} (or '
+             f'empty: chosen by the folds)'),
             (min(self.augment_offset, self.augment_gain, self.augment_noise)
              >= 0 and 0 <= self.augment_dropout < 1,
              'augmentation amounts must be >= 0 (dropout < 1)'),
@@ -70,6 +87,18 @@ class TrainConfig:
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
+
+    def batch_for(self, n):
+        """Return the mini-batch size for ``n`` training scans."""
+        if self.batch_size:
+            return self.batch_size
+        low, high = BATCH_BOUNDS
+        return int(min(high, max(low, 2 ** round(
+            math.log2(max(n, 1) / STEPS_PER_EPOCH)))))
+
+    def fold_seed(self, k):
+        """Return the seed of fold ``k``'s network (apart from members')."""
+        return self.seed + 1000 * (k + 1)
 
     @property
     def augmenting(self):

@@ -51,7 +51,7 @@ class _Inputs:
         if self.augmenter is None:
             rows, cols = np.nonzero(~np.isnan(rssi))
             self.fixed = self._entries(rows, cols, rssi[rows, cols])
-        self.batch_size = config.batch_size
+        self.batch_size = config.batch_for(self.n)
         self.generator = torch.Generator().manual_seed(seed)
 
     def _entries(self, rows, cols, dbm):

@@ -8,19 +8,20 @@ scan is then placed among the kept scans of its predicted class: that
 chooses the k-NN's k and calibrates the position sigma per class.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
 
-from ..core.locator import calibrated_sigma, Locator
+from ..core.locator import calibrated_sigma, Locator, METRICS
+from ..core.preprocessing import signal, SIGNALS
 from ..core.scan import ScanMapper
 from .fitting import best_epoch, config_scaler, fit_network
 from .folds import grouped_folds
 
 
 #: k of the position k-NN that cross-validation chooses from.
-NEIGHBOURS = (3, 5, 7, 10)
+NEIGHBOURS = (1, 3, 5, 7, 9, 11)
 
 
 @dataclass
@@ -35,13 +36,8 @@ class _Split:
     held_position: object   # their positions (n, 2), or None
 
     @property
-    def kept(self):
-        """Return the Fingerprints trained on (a copy: made when needed)."""
-        return self.fp.subset(self.keep)
-
-    @property
     def y(self):
-        """Return the class indices of :attr:`kept`."""
+        """Return the class indices of the kept scans."""
         return self.all_y[self.keep]
 
 
@@ -56,6 +52,7 @@ def cross_validate(fp, y, n_classes, config, log=print):
     chooses k and calibrates the position sigma per class.
     """
     y = np.asarray(y)
+    config = replace(config, batch_size=config.batch_for(len(fp)))
     folds = grouped_folds(fp, y, config.folds, config.grouping, config.seed)
     log(f'cross-validation: {len(folds.held_out)} folds of whole '
         f'{folds.grouping} groups ({folds.groups} groups'
@@ -114,7 +111,26 @@ def validate(fp, y, classes, validation, config, log=print):
 
 def _select(splits, n_classes, config, log):
     """Train and score each split; return curves, the choice, positions."""
-    runs, fold_info = [], []
+    fold_info = [{'held_out_scans': len(split.held_y),
+                  'classes': sorted(set(split.held_y.tolist()))}
+                 for split in splits]
+    if n_classes == 1:      # nothing to classify: every scan is the class
+        summary = {'folds': fold_info}
+        predicted = [np.zeros(len(split.held_y), np.int64)
+                     for split in splits]
+    else:
+        summary, predicted = _select_epochs(splits, n_classes, config, log)
+        summary['folds'] = fold_info
+    if all(s.fp.position is not None and s.held_position is not None
+           for s in splits):
+        summary.update(_cross_validate_position(splits, predicted,
+                                                n_classes, config, log))
+    return summary
+
+
+def _select_epochs(splits, n_classes, config, log):
+    """Return the epoch summary and each split's classes at that epoch."""
+    runs = []
     for k, split in enumerate(splits):
         rssi = split.fp.rssi[split.keep]
         scaler = config_scaler(config).fit(rssi)
@@ -122,70 +138,91 @@ def _select(splits, n_classes, config, log):
                     torch.from_numpy(split.held_y))
         log(f'fold {k + 1}/{len(splits)}: {len(rssi)} scans train, '
             f'{len(split.held_y)} held out')
-        _, predictions = fit_network(
+        runs.append(fit_network(
             rssi, torch.from_numpy(split.y), n_classes, scaler, config,
-            config.epochs, config.seed + 1000 * (k + 1), held_out, log)
-        runs.append((scaler, predictions))
-        fold_info.append({'held_out_scans': len(split.held_y),
-                          'classes': sorted(set(split.held_y.tolist()))})
+            config.epochs, config.fold_seed(k), held_out, log)[1])
     curves = np.array([[(c == split.held_y).mean() for c in predictions]
-                       for split, (_, predictions) in zip(splits, runs)])
+                       for split, predictions in zip(splits, runs)])
     mean = curves.mean(axis=0)
     best = best_epoch(mean)
-    summary = {'folds': fold_info, 'curves': np.round(curves, 5).tolist(),
-               'mean_curve': np.round(mean, 5).tolist(), 'epochs': best + 1,
-               'accuracy_mean': float(mean[best]),
-               'accuracy_min': float(curves[:, best].min()),
-               'accuracy_max': float(curves[:, best].max())}
-    if all(s.fp.position is not None and s.held_position is not None
-           for s in splits):
-        summary.update(_cross_validate_position(
-            splits, [(scaler, predictions[best])
-                     for scaler, predictions in runs], n_classes, config,
-            log))
-    return summary
+    return ({'curves': np.round(curves, 5).tolist(),
+             'mean_curve': np.round(mean, 5).tolist(), 'epochs': best + 1,
+             'accuracy_mean': float(mean[best]),
+             'accuracy_min': float(curves[:, best].min()),
+             'accuracy_max': float(curves[:, best].max())},
+            [predictions[best] for predictions in runs])
 
 
-def _cross_validate_position(splits, runs, n_classes, config, log):
-    """Return the chosen k, its held-out errors (m) and sigma per class."""
-    candidates = (config.neighbours,) if config.neighbours else NEIGHBOURS
-    errors = {k: [] for k in candidates}
-    predicted = []
-    for split, (scaler, classes) in zip(splits, runs):
-        locator = reference_locator(split.kept, split.y, n_classes,
-                                    scaler)
-        inputs = _relative(split.held_rssi, scaler)
-        distances = []
-        for rssi, x, c in zip(split.held_rssi, inputs, classes):
-            columns = np.flatnonzero(~np.isnan(rssi))
-            distances.append(locator.distances(columns, x[columns], c))
-        for k in candidates:
-            xy = np.array([locator.weighted(d, k, c)[0]
-                           for d, c in zip(distances, classes)])
-            errors[k].append(np.linalg.norm(xy - split.held_position,
-                                            axis=1))
-        predicted.append(classes)
-    mean = {k: float(np.nanmean(np.concatenate(e)))
-            for k, e in errors.items()}
-    k = min(mean, key=mean.get)
-    error = np.concatenate(errors[k])
+def _cross_validate_position(splits, predicted, n_classes, config, log):
+    """
+    Return the chosen signal, distance and k, held-out errors, sigmas.
+
+    Each held-out scan is placed among the kept scans of its predicted
+    class in every candidate space; the space and k with the least mean
+    error win, and their errors calibrate the sigma of each class.
+    """
+    ks = (config.neighbours,) if config.neighbours else NEIGHBOURS
+    spaces = _spaces(config)
+    errors = {}
+    for split, classes in zip(splits, predicted):
+        keep = split.keep
+        detected = [np.flatnonzero(~np.isnan(r)) for r in split.held_rssi]
+        for rep, metric in spaces:
+            locator = Locator.build(
+                split.fp.rssi[keep], split.y, split.fp.position[keep],
+                n_classes, representation=rep, metric=metric)
+            xy = np.array([_positions(locator, ks, cols,
+                                      signal(rssi[cols], rep), c)
+                           for rssi, cols, c in zip(split.held_rssi,
+                                                    detected, classes)])
+            for i, k in enumerate(ks):
+                errors.setdefault((rep, metric, k), []).append(
+                    np.linalg.norm(xy[:, i] - split.held_position, axis=1))
+    mean = {key: float(np.nanmean(np.concatenate(e)))
+            for key, e in errors.items()}
+    rep, metric, k = min(mean, key=mean.get)
+    error = np.concatenate(errors[rep, metric, k])
     placed = np.isfinite(error)
-    log(f'position: k={k}, held-out mean error {mean[k]:.2f} m ('
-        + ', '.join(f'k={n}: {e:.2f}' for n, e in mean.items()) + ')')
-    return {'neighbours': k, 'position_mean_error_m': mean[k],
+    log(f'position: {metric} distance over the {rep} signal, k={k}, '
+        f'held-out mean error {mean[rep, metric, k]:.2f} m')
+    return {'neighbours': k, 'position_representation': rep,
+            'position_metric': metric,
+            'position_mean_error_m': mean[rep, metric, k],
             'position_median_error_m': float(np.median(error[placed])),
             'sigma_m': calibrated_sigma(
                 error[placed], np.concatenate(predicted)[placed],
                 n_classes).tolist()}
 
 
-def _relative(rssi, scaler):
-    """Return inputs relative to an empty scan: 0 where nothing detected."""
-    return scaler.transform(rssi) - scaler.blank()
+def _spaces(config):
+    """Return the (signal, distance) pairs the position CV chooses from."""
+    signals = (config.position_representation,) \
+        if config.position_representation else SIGNALS
+    metrics = (config.position_metric,) if config.position_metric \
+        else METRICS
+    return [(r, m) for r in signals for m in metrics]
 
 
-def reference_locator(fp, y, n_classes, scaler, neighbours=5,
-                      sigma=None):
-    """Return a :class:`Locator` of the scans of ``fp`` (class ``y``)."""
-    return Locator.build(_relative(fp.rssi, scaler), y, fp.position,
-                         n_classes, neighbours, sigma, fp.position_columns)
+def _positions(locator, ks, columns, values, c):
+    """Return the k-NN position (len(ks), 2) of one scan for every k."""
+    d = locator.distances(columns, values, c)
+    if not len(d):
+        return np.full((len(ks), 2), np.nan)
+    n = min(max(ks), len(d))
+    near = np.argpartition(d, n - 1)[:n]
+    near = near[np.argsort(d[near], kind='stable')]
+    weight = 1.0 / np.maximum(d[near], 1e-6)
+    total = np.cumsum(weight)
+    xy = np.cumsum(weight[:, None] *
+                   locator.xy[locator.class_start[c] + near], axis=0)
+    last = np.minimum(ks, n) - 1
+    return locator.origin + xy[last] / total[last, None]
+
+
+def reference_locator(fp, y, n_classes, selection):
+    """Return the :class:`Locator` of ``fp`` (class ``y``) as selected."""
+    return Locator.build(fp.rssi, y, fp.position, n_classes,
+                         selection['neighbours'], selection['sigma_m'],
+                         fp.position_columns,
+                         selection['position_representation'],
+                         selection['position_metric'])

@@ -8,7 +8,7 @@ epochs.
 """
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import torch
@@ -35,11 +35,12 @@ def train(fp, config, log=print, validation=None):
     """
     Train on :class:`Fingerprints`; return (PlaceModel, nets, report).
 
-    The epoch count (and the position's k and sigma) is chosen on
+    The epoch count (and the position's k-NN and sigma) is chosen on
     ``validation`` (Fingerprints) when given, else by grouped
     cross-validation with ``config.folds``, else ``config.epochs`` is
     used; then ``config.ensemble`` networks (seeds ``seed``, ``seed + 1``
-    …) are trained on all scans of ``fp``.
+    …) are trained on all scans of ``fp``. Data of one building/floor
+    class makes a position-only model: no network (``nets`` empty).
     """
     start = time.perf_counter()
     check_trainable(fp)
@@ -48,15 +49,20 @@ def train(fp, config, log=print, validation=None):
     report.dropped_empty = int((~usable).sum())
     fp = fp.subset(usable)
     report.train_samples = len(fp)
+    config = replace(config, batch_size=config.batch_for(len(fp)))
     classes, y = class_index(fp.building, fp.floor)
     y = torch.from_numpy(y)
-    report.epochs = config.epochs
+    one_class = len(classes) == 1
+    report.epochs = 0 if one_class else config.epochs
     if validation is not None:
         report.selection = validate(fp, y.numpy(), classes, validation,
                                     config, log)
     elif config.folds:
         report.selection = cross_validate(fp, y, len(classes), config, log)
-    if report.selection:
+    if one_class:
+        log(f'one building/floor class ({classes[0][0]}, {classes[0][1]}): '
+            f'a position-only model, no network')
+    elif report.selection:
         report.epochs = report.selection['epochs']
         s = report.selection
         log(f'held-out building+floor {s["accuracy_mean"]:.4f} '
@@ -65,7 +71,7 @@ def train(fp, config, log=print, validation=None):
             + f'at {report.epochs} epochs')
     scaler = config_scaler(config).fit(fp.rssi)
     nets = []
-    for k in range(config.ensemble):
+    for k in range(0 if one_class else config.ensemble):
         log(f'member {k + 1}/{config.ensemble}: all {len(fp)} scans, '
             f'{report.epochs} epochs')
         nets.append(fit_network(fp.rssi, y, len(classes), scaler, config,
@@ -73,9 +79,13 @@ def train(fp, config, log=print, validation=None):
                                 log=log)[0])
     position = None
     if fp.position is not None and 'sigma_m' in report.selection:
-        position = reference_locator(
-            fp, y.numpy(), len(classes), scaler,
-            report.selection['neighbours'], report.selection['sigma_m'])
+        position = reference_locator(fp, y.numpy(), len(classes),
+                                     report.selection)
+    elif one_class:
+        raise ValueError('a one-class model is position-only: its position '
+                         'uncertainty is calibrated on held-out scans, so '
+                         'it needs --folds >= 2 or --validation data with '
+                         'positions')
     elif fp.position is not None:
         log('no position output: its uncertainty is calibrated on held-out '
             'scans with positions (none with folds 0, or validation data '
