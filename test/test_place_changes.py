@@ -126,14 +126,29 @@ def test_a_walk_that_changes_floor_reseeds_nav2_and_latches_the_place(
     assert 'initialpose sent (position jumped ' in log, log
 
 
-def test_jump_threshold_is_a_ranged_runtime_parameter(ros, tmp_path,
-                                                      located):
-    with running_node(ros, tmp_path, located, 'jump_node') as (client, *_):
+def test_a_rejected_scan_gives_no_pose_and_changes_nothing(
+        ros, tmp_path, located):
+    building = Building()
+    with running_node(ros, tmp_path, located, 'jump_node', '-p',
+                      'initial_pose_on_change:=true', '-p',
+                      'publish_initial_pose:=true') as (client, *_):
+        poses = []
+        sub = ros.create_subscription(PoseWithCovarianceStamped,
+                                      '/jump_node/pose', poses.append,
+                                      RELIABLE)
+        assert wait_until(lambda: sub.get_publisher_count(), 30, ros)
         assert client.set_param('jump_threshold', 8.0).successful
         for bad in (0.5, 1000.0, float('nan')):
             result = client.set_param('jump_threshold', bad)
             assert not result.successful and result.reason, bad
-        assert client.set_param('initial_pose_on_change', True).successful
+        names, rssi = building.scan(10, 10, 0)
+        status = client.send(names, rssi[:-1])      # one RSSI missing
+        assert status.message.startswith('scan rejected: ')
+        assert client.send(names, rssi).message.startswith('building ')
+        assert wait_until(lambda: any(p.header.stamp.sec == client.seq
+                                      for p in poses), 10, ros)
+        assert client.seq - 1 not in [p.header.stamp.sec for p in poses]
+        ros.destroy_subscription(sub)
 
 
 def test_reseeding_needs_a_model_with_positions(synthetic):
