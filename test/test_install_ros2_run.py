@@ -17,10 +17,14 @@ def test_pip_install_puts_every_executable_where_ros2_run_looks(tmp_path):
         '.venv', '.git', 'build', 'install', 'log', '*.egg-info',
         '__pycache__', 'benchmarks', 'test'))
     prefix = tmp_path / 'prefix'
+    # --ignore-installed: without it pip first uninstalls the package from
+    # the running environment (the test's own .venv) to install it here.
     result = run([sys.executable, '-m', 'pip', 'install', '--no-deps',
-                  '--no-build-isolation', '--no-index', '--prefix', prefix,
-                  source], cwd=tmp_path)
+                  '--no-build-isolation', '--no-index', '--ignore-installed',
+                  '--prefix', prefix, source], cwd=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
+    kept = run([sys.executable, '-m', 'pip', 'show', '-q', PACKAGE])
+    assert kept.returncode == 0, 'the running environment lost the package'
     installed = sorted(p.name for p in (prefix / 'bin').iterdir())
     ros2_run = prefix / 'lib' / PACKAGE     # what `ros2 run` executes
     assert sorted(p.name for p in ros2_run.iterdir()) == installed
