@@ -50,7 +50,7 @@ def ideas(args, data, epochs=8, copies=8):
         scores = {}
         for k, held in enumerate(held_out):
             kept_rssi, held_rssi = train_fp.rssi[~held], train_fp.rssi[held]
-            fold_seed = seed + 1000 * (k + 1)
+            fold_seed = config.fold_seed(k)
             scaler, net = _fold_network(kept_rssi, y[~held], len(classes),
                                         config, epochs, fold_seed)
             with torch.no_grad():

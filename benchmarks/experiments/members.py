@@ -31,7 +31,7 @@ def members(args, data):
             proba = [fit_network(
                 train_fp.rssi[~held], torch.from_numpy(y[~held]),
                 len(classes), scaler, config, config.epochs,
-                seed + 1000 * (k + 1) + m, (x, torch.from_numpy(y[held])),
+                config.fold_seed(k) + m, (x, torch.from_numpy(y[held])),
                 log=lambda line: None, proba=True)[1]
                 for m in range(args.members)]
             proba = np.array(proba)             # (m, epochs, n, k)
