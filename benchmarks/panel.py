@@ -164,7 +164,7 @@ def knn_baselines(train_fp, test_fp):
 
 
 def forest(train_fp, test_fp, seed):
-    """Return the test figures of a random forest (100 trees, dBm)."""
+    """Return the test figures of a random forest: 100 trees on dBm."""
     fp = train_fp.subset(~train_fp.empty_rows)
     classes, y = class_index(fp.building, fp.floor)
     test_rssi = ScanMapper(fp.ap_ids).map_rows(test_fp.ap_ids, test_fp.rssi)
@@ -234,8 +234,7 @@ def run(args):
 def cv(args):
     """Cross-validate recipe variants on every dataset (no test file)."""
     from wifi_place_recognition.training.selection import cross_validate
-    variants = json.loads(args.variants) if args.variants else {'default':
-                                                                 {}}
+    variants = json.loads(args.variants or '{"default": {}}')
     out = {}
     for name in args.datasets:
         fp = _read(args.root, name, 'train')

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from wifi_place_recognition.core.artifact import (load_model,
                                                   ModelFileError, save_model)
-from wifi_place_recognition.core.locator import Locator
+from wifi_place_recognition.core.locator import calibrated_sigma, Locator, R95
 from wifi_place_recognition.core.preprocessing import signal
 
 
@@ -64,7 +64,9 @@ def test_locate_is_distance_weighted_knn_within_the_class(representation,
         expected = weight @ xy[mine[nearest]] / weight.sum()
         got, sigma = locator.locate(columns, query[columns], c)
         np.testing.assert_allclose(got, expected, atol=1e-3)
-        assert sigma == c + 1.0
+        # sigma: the class's scale times the nearest distance (>= 0.1 m)
+        assert sigma == pytest.approx(max((c + 1) * distance.min(), 0.1),
+                                      rel=1e-4)
 
 
 def test_locator_in_the_model_file_and_tampered_indices(synthetic,
@@ -132,3 +134,18 @@ def test_empty_classes_and_scans_sharing_no_ap():
     first = locator.class_start[0]
     np.testing.assert_allclose(
         d ** 2, 1.0 + locator.norms[first:first + len(d)], rtol=1e-5)
+
+
+def test_sigma_scales_with_the_nearest_distance_calibrated_per_class():
+    rng = np.random.default_rng(3)
+    nearest = rng.uniform(0.1, 1.0, 3000)
+    predicted = rng.integers(0, 3, 3000)
+    predicted[:10] = 3                  # too few scans: the overall scale
+    errors = nearest * rng.rayleigh(1.0 + predicted)
+    scale = calibrated_sigma(errors, nearest, predicted, 5)
+    inside = errors <= R95 * scale[predicted] * nearest
+    for c in range(3):
+        assert inside[predicted == c].mean() == pytest.approx(0.95, abs=0.01)
+    overall = np.quantile(errors / nearest, 0.95) / R95
+    assert scale[3] == scale[4] == pytest.approx(overall)
+    assert scale[0] < scale[1] < scale[2]

@@ -61,7 +61,7 @@ def test_pose_per_answer_in_the_floor_frame_with_the_model_covariance(
         poses = Poses(ros, 'pose_node')
         assert wait_until(lambda: poses.subs[0].get_publisher_count(), 30,
                           ros)
-        errors = []
+        errors, sigmas = [], []
         for row in range(len(fp)):
             stamp, values = _send(client, fp, row)
             assert wait_until(lambda: any(
@@ -81,8 +81,9 @@ def test_pose_per_answer_in_the_floor_frame_with_the_model_covariance(
                                        rtol=1e-3)  # values carry 3 decimals
             assert cov[5, 5] >= 1e6    # yaw unknown
             errors.append(np.linalg.norm(xy - fp.position[row]))
+            sigmas.append(sigma)
         assert np.mean(errors) < 10.0, errors
-        assert np.mean(np.array(errors) <= R95 * sigma) >= 0.7
+        assert np.mean(np.array(errors) <= R95 * np.array(sigmas)) >= 0.7
         assert not client.set_param('frame_id', 'map_{room}').successful
         assert poses.initial == []
 

@@ -266,8 +266,8 @@ def _position(header, arrays, n_aps, n_classes):
         if (mine >= n_aps).any() or (np.diff(mine) <= 0).any():
             raise ModelFileError(f'position: the AP columns of class {c} '
                                  f'are not ascending model columns')
-    if not (a['sigma'] > 0).all() or (a['scale'] < 0).any():
-        raise ModelFileError('position: sigma must be > 0 and scales >= 0')
+    if (a['sigma'] < 0).any() or (a['scale'] < 0).any():
+        raise ModelFileError('position: sigma and scales must be >= 0')
     return Locator(origin, class_start, ap_start, ap_column, a['scale'],
                    a['codes'].astype(np.int8), a['norms'], a['xy'],
                    a['sigma'], n_aps, k, tuple(columns),

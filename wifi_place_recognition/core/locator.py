@@ -25,6 +25,8 @@ METRICS = ('euclidean', 'sorensen')
 
 #: Radius of the 95 % circle of a 2-D isotropic Gaussian, in sigmas.
 R95 = float(np.sqrt(-2 * np.log(0.05)))
+#: The smallest sigma (m) a position is given.
+MIN_SIGMA = 0.1
 #: Largest int8 code of a reference value.
 LEVELS = 127
 
@@ -34,8 +36,11 @@ class Locator:
     """
     Reference scans with their positions, grouped by class, and k.
 
-    ``sigma[c]`` (metres) was calibrated on held-out scans predicted as
-    class c, so that a circle of 2.45 sigma holds 95 % of them.
+    A scan's sigma grows with its distance to the nearest reference (a
+    scan unlike every reference is placed less surely): ``sigma[c]``
+    (metres per unit of distance) was calibrated on held-out scans
+    predicted as class c, so that a circle of 2.45 sigma holds 95 % of
+    them; it is at least :data:`MIN_SIGMA`.
     """
 
     origin: np.ndarray    # float64 (2,)
@@ -47,7 +52,7 @@ class Locator:
     norms: np.ndarray     # float32 (n_refs,): squared L2 norm (euclidean)
     #                       or L1 norm (sorensen) of each reference
     xy: np.ndarray        # float32 (n_refs, 2): position - origin
-    sigma: np.ndarray     # float32 (k,)
+    sigma: np.ndarray     # float32 (k,): m per unit of nearest distance
     n_aps: int            # width of the model's AP vector
     neighbours: int = 5
     columns: tuple = ('X', 'Y')
@@ -161,20 +166,23 @@ class Locator:
         nearest = np.argpartition(distance, k - 1)[:k]
         weight = 1.0 / np.maximum(distance[nearest], 1e-6)
         xy = weight @ self.xy[self.class_start[c] + nearest] / weight.sum()
-        return self.origin + xy, float(self.sigma[c])
+        return self.origin + xy, max(
+            float(self.sigma[c] * distance[nearest].min()), MIN_SIGMA)
 
 
-def calibrated_sigma(errors, predicted, n_classes, min_scans=30):
+def calibrated_sigma(errors, nearest, predicted, n_classes, min_scans=30):
     """
-    Return a sigma (m) per class: its 95th percentile error / R95.
+    Return the sigma scale per class: m per unit of nearest distance.
 
-    ``errors`` and ``predicted`` (class) of held-out scans; a class
-    predicted for fewer than ``min_scans`` of them gets the value of all.
+    ``errors`` (m), ``nearest`` (distance to the nearest reference) and
+    ``predicted`` (class) of held-out scans: the class's 95th percentile
+    of error / nearest, over R95; a class predicted for fewer than
+    ``min_scans`` of them gets the value of all.
     """
-    overall = np.quantile(errors, 0.95) / R95
-    sigma = np.full(n_classes, overall)
+    ratio = errors / np.maximum(nearest, 1e-6)
+    scale = np.full(n_classes, np.quantile(ratio, 0.95) / R95)
     for c in range(n_classes):
-        mine = errors[predicted == c]
+        mine = ratio[predicted == c]
         if len(mine) >= min_scans:
-            sigma[c] = np.quantile(mine, 0.95) / R95
-    return np.maximum(sigma, 0.1)
+            scale[c] = np.quantile(mine, 0.95) / R95
+    return scale

@@ -39,7 +39,8 @@ class TrainConfig:
     augment_noise: float = 2.0    # dB, normal std per reading
     augment_dropout: float = 0.1  # probability to drop a detected AP
     sae_epochs: int = 10
-    epochs: int = 20              # the most; cross-validation picks fewer
+    epochs: int = 60              # the most; selection stops earlier
+    patience: int = 5             # epochs without a better held-out mean
     batch_size: int = 0           # 0: from the number of scans
     learning_rate: float = 3e-3
     neighbours: int = 0           # k of the position k-NN; 0: by the folds
@@ -62,8 +63,9 @@ class TrainConfig:
             (self.activation in ACTIVATION_NAMES,
              f'activation must be one of {ACTIVATION_NAMES}'),
             (0.0 <= self.dropout < 1.0, 'dropout must be in [0, 1)'),
-            (self.sae_epochs >= 0 and self.epochs >= 1,
-             'sae_epochs must be >= 0 and epochs >= 1'),
+            (self.sae_epochs >= 0 and self.epochs >= 1 and
+             self.patience >= 1,
+             'sae_epochs must be >= 0, epochs and patience >= 1'),
             (self.folds == 0 or self.folds >= 2,
              'folds must be 0 (no selection) or at least 2'),
             (self.grouping in GROUPINGS,

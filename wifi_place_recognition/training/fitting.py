@@ -19,18 +19,28 @@ from .augment import ScanAugmenter
 from .network import PlaceNet, SparseBatch
 
 
-@contextlib.contextmanager
-def _torch_state(threads, seed):
-    """Seed torch (and set its threads) inside, restore both after."""
-    before = torch.get_num_threads()
-    with torch.random.fork_rng():
-        torch.manual_seed(seed)
-        if threads:
-            torch.set_num_threads(threads)
+class _TorchState:
+    """One network's own torch random stream and threads, entered per step."""
+
+    def __init__(self, threads, seed):
+        self.threads = threads
+        with torch.random.fork_rng():
+            torch.manual_seed(seed)
+            self.rng = torch.get_rng_state()
+
+    @contextlib.contextmanager
+    def active(self):
+        """Run inside with this stream (and threads); restore both after."""
+        rng, threads = torch.get_rng_state(), torch.get_num_threads()
+        torch.set_rng_state(self.rng)
+        if self.threads:
+            torch.set_num_threads(self.threads)
         try:
             yield
         finally:
-            torch.set_num_threads(before)
+            self.rng = torch.get_rng_state()
+            torch.set_rng_state(rng)
+            torch.set_num_threads(threads)
 
 
 class _Inputs:
@@ -101,7 +111,28 @@ def fit_network(rssi, y, n_classes, scaler, config, epochs, seed,
     predicted classes after every epoch (with ``proba``, their class
     probabilities). Returns (net, [per-epoch arrays]).
     """
-    with _torch_state(config.threads, seed):
+    predictions = []
+    for _, (net, predicted) in zip(range(epochs), training_epochs(
+            rssi, y, n_classes, scaler, config, seed, held_out, log, proba,
+            epochs)):
+        if predicted is not None:
+            predictions.append(predicted)
+    net.eval()
+    return net, predictions
+
+
+def training_epochs(rssi, y, n_classes, scaler, config, seed, held_out=None,
+                    log=print, proba=False, most=None):
+    """
+    Train one network; yield (net, held-out predictions) after each epoch.
+
+    As :func:`fit_network`, one fine-tuning epoch at a time, until the
+    caller stops (``most`` only numbers the log lines). Each network keeps
+    its own random stream, so networks trained side by side (the folds)
+    are the same as trained one after the other.
+    """
+    state = _TorchState(config.threads, seed)
+    with state.active():
         inputs = _Inputs(rssi, scaler, config, seed)
         net = PlaceNet(rssi.shape[1], n_classes, config)
         sae = net.autoencoder()
@@ -119,8 +150,11 @@ def fit_network(rssi, y, n_classes, scaler, config, epochs, seed,
                 f'reconstruction mse {total / len(rssi):.4f}')
         optimiser = torch.optim.Adam(net.parameters(),
                                      lr=config.learning_rate)
-        predictions = []
-        for epoch in range(1, epochs + 1):
+    epoch = 0
+    while True:
+        epoch += 1
+        predicted = None
+        with state.active():
             total = 0.0
             for idx, x in inputs.epoch():
                 optimiser.zero_grad()
@@ -128,16 +162,15 @@ def fit_network(rssi, y, n_classes, scaler, config, epochs, seed,
                 loss.backward()
                 optimiser.step()
                 total += loss.item() * len(idx)
-            line = f'  epoch {epoch:3d}/{epochs}  loss {total / len(rssi):.4f}'
+            line = f'  epoch {epoch:3d}' + (f'/{most}' if most else '') + \
+                f'  loss {total / len(rssi):.4f}'
             if held_out is not None:
-                predictions.append(_predicted(net, held_out[0], proba))
-                classes = predictions[-1].argmax(axis=1) if proba else \
-                    predictions[-1]
+                predicted = _predicted(net, held_out[0], proba)
+                classes = predicted.argmax(axis=1) if proba else predicted
                 right = (classes == held_out[1].numpy()).mean()
                 line += f'  held-out building+floor {right:.4f}'
-            log(line)
-        net.eval()
-    return net, predictions
+        log(line)
+        yield net, predicted
 
 
 def best_epoch(mean, window=3):

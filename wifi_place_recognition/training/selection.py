@@ -16,7 +16,7 @@ import torch
 from ..core.locator import calibrated_sigma, Locator, METRICS
 from ..core.preprocessing import signal, SIGNALS
 from ..core.scan import ScanMapper
-from .fitting import best_epoch, config_scaler, fit_network
+from .fitting import best_epoch, config_scaler, training_epochs
 from .folds import grouped_folds
 
 
@@ -129,7 +129,13 @@ def _select(splits, n_classes, config, log):
 
 
 def _select_epochs(splits, n_classes, config, log):
-    """Return the epoch summary and each split's classes at that epoch."""
+    """
+    Return the epoch summary and each split's classes at that epoch.
+
+    The splits' networks train side by side, an epoch at a time, until the
+    smoothed mean held-out curve has not risen for ``config.patience``
+    epochs (or ``config.epochs`` are done).
+    """
     runs = []
     for k, split in enumerate(splits):
         rssi = split.fp.rssi[split.keep]
@@ -138,19 +144,28 @@ def _select_epochs(splits, n_classes, config, log):
                     torch.from_numpy(split.held_y))
         log(f'fold {k + 1}/{len(splits)}: {len(rssi)} scans train, '
             f'{len(split.held_y)} held out')
-        runs.append(fit_network(
+        runs.append(training_epochs(
             rssi, torch.from_numpy(split.y), n_classes, scaler, config,
-            config.epochs, config.fold_seed(k), held_out, log)[1])
-    curves = np.array([[(c == split.held_y).mean() for c in predictions]
-                       for split, predictions in zip(splits, runs)])
-    mean = curves.mean(axis=0)
-    best = best_epoch(mean)
+            config.fold_seed(k), held_out,
+            lambda line, k=k: log(f'fold {k + 1}{line}'), most=config.epochs))
+    predictions = [[] for _ in splits]
+    for epoch in range(config.epochs):
+        for run, predicted in zip(runs, predictions):
+            predicted.append(next(run)[1])
+        curves = np.array([[(c == split.held_y).mean() for c in predicted]
+                           for split, predicted in zip(splits, predictions)])
+        mean = curves.mean(axis=0)
+        best = best_epoch(mean)
+        if epoch - best >= config.patience:
+            log(f'no better held-out mean for {config.patience} epochs: '
+                f'stopped after {epoch + 1}')
+            break
     return ({'curves': np.round(curves, 5).tolist(),
              'mean_curve': np.round(mean, 5).tolist(), 'epochs': best + 1,
              'accuracy_mean': float(mean[best]),
              'accuracy_min': float(curves[:, best].min()),
              'accuracy_max': float(curves[:, best].max())},
-            [predictions[best] for predictions in runs])
+            [predicted[best] for predicted in predictions])
 
 
 def _cross_validate_position(splits, predicted, n_classes, config, log):
@@ -163,7 +178,7 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
     """
     ks = (config.neighbours,) if config.neighbours else NEIGHBOURS
     spaces = _spaces(config)
-    errors = {}
+    errors, nearest = {}, {}
     for split, classes in zip(splits, predicted):
         keep = split.keep
         detected = [np.flatnonzero(~np.isnan(r)) for r in split.held_rssi]
@@ -171,10 +186,12 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
             locator = Locator.build(
                 split.fp.rssi[keep], split.y, split.fp.position[keep],
                 n_classes, representation=rep, metric=metric)
-            xy = np.array([_positions(locator, ks, cols,
-                                      signal(rssi[cols], rep), c)
-                           for rssi, cols, c in zip(split.held_rssi,
-                                                    detected, classes)])
+            xy, near = zip(*(_positions(locator, ks, cols,
+                                        signal(rssi[cols], rep), c)
+                             for rssi, cols, c in zip(split.held_rssi,
+                                                      detected, classes)))
+            xy = np.array(xy)
+            nearest.setdefault((rep, metric), []).append(np.array(near))
             for i, k in enumerate(ks):
                 errors.setdefault((rep, metric, k), []).append(
                     np.linalg.norm(xy[:, i] - split.held_position, axis=1))
@@ -190,8 +207,8 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
             'position_mean_error_m': mean[rep, metric, k],
             'position_median_error_m': float(np.median(error[placed])),
             'sigma_m': calibrated_sigma(
-                error[placed], np.concatenate(predicted)[placed],
-                n_classes).tolist()}
+                error[placed], np.concatenate(nearest[rep, metric])[placed],
+                np.concatenate(predicted)[placed], n_classes).tolist()}
 
 
 def _spaces(config):
@@ -204,10 +221,10 @@ def _spaces(config):
 
 
 def _positions(locator, ks, columns, values, c):
-    """Return the k-NN position (len(ks), 2) of one scan for every k."""
+    """Return one scan's positions (one per k) and nearest distance."""
     d = locator.distances(columns, values, c)
     if not len(d):
-        return np.full((len(ks), 2), np.nan)
+        return np.full((len(ks), 2), np.nan), np.nan
     n = min(max(ks), len(d))
     near = np.argpartition(d, n - 1)[:n]
     near = near[np.argsort(d[near], kind='stable')]
@@ -216,7 +233,7 @@ def _positions(locator, ks, columns, values, c):
     xy = np.cumsum(weight[:, None] *
                    locator.xy[locator.class_start[c] + near], axis=0)
     last = np.minimum(ks, n) - 1
-    return locator.origin + xy[last] / total[last, None]
+    return locator.origin + xy[last] / total[last, None], d[near[0]]
 
 
 def reference_locator(fp, y, n_classes, selection):
