@@ -26,8 +26,7 @@ from collections import Counter
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
-                                ParameterDescriptor, SetParametersResult)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -35,6 +34,8 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from ..core.artifact import load_model, ModelFileError
+from .classifier_parameters import (check_frame, declare, no_position,
+                                    RECOGNIZER_SETTINGS, refusal)
 from .messages import key_value as _kv, pose_message, stamp_time
 from .place_changes import PlaceChanges
 from .runner import names_the_node, run
@@ -42,13 +43,9 @@ from .sequence import PublisherGaps
 from ..core.recognizer import OK, PlaceRecognizer, WARN
 from ..core.resources import default_model_path
 from ..core.scan import REJECT_REASONS, ScanRejected
-from ..core.tracking import DEFAULT_TIMEOUT
 
 LEVELS = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN}
 THROTTLE_S = 5.0
-#: Parameters that :meth:`PlaceRecognizer.configure` takes, by name.
-RECOGNIZER_SETTINGS = ('min_confidence', 'min_known_aps', 'max_aps',
-                       'tracking', 'tracking_timeout')
 # Sensor-data QoS that keeps only the newest scan waiting.
 SCAN_QOS = copy.copy(qos_profile_sensor_data)
 SCAN_QOS.depth = 1
@@ -73,17 +70,6 @@ def _memory_mib():
     return found.get('VmRSS', math.nan), found.get('VmHWM', math.nan)
 
 
-def _check_frame(template):
-    """Raise ValueError unless ``template`` formats with building, floor."""
-    try:
-        frame = template.format(building=0, floor=0)
-    except (KeyError, IndexError, ValueError) as exc:
-        raise ValueError(f'frame_id {template!r}: only {{building}} and '
-                         f'{{floor}} may be substituted ({exc!r})') from None
-    if not frame:
-        raise ValueError('frame_id must not be empty')
-
-
 class ClassifierNode(Node):
     """
     Thin ROS adapter around :class:`PlaceRecognizer`.
@@ -95,61 +81,13 @@ class ClassifierNode(Node):
     @names_the_node
     def __init__(self, make_forward=None, **kwargs):
         super().__init__('classifier_node', **kwargs)
-        model_path = self.declare_parameter(
-            'model_path', '', ParameterDescriptor(
-                description='model file from train_model; empty: the '
-                            'shipped UJIIndoorLoc model',
-                read_only=True)).value or str(default_model_path())
-        self.declare_parameter(
-            'min_confidence', 0.5, ParameterDescriptor(
-                description='below this top-class probability the status '
-                            'is WARN',
-                floating_point_range=[FloatingPointRange(
-                    from_value=0.0, to_value=1.0)]))
-        self.declare_parameter(
-            'min_known_aps', 3, ParameterDescriptor(
-                description='with fewer APs known to the model the status '
-                            'is WARN',
-                integer_range=[IntegerRange(
-                    from_value=0, to_value=10000, step=1)]))
-        self.declare_parameter(
-            'max_aps', 4096, ParameterDescriptor(
-                description='scans listing more APs are rejected',
-                integer_range=[IntegerRange(
-                    from_value=1, to_value=1000000, step=1)]))
-        self.declare_parameter(
-            'tracking', False, ParameterDescriptor(
-                description='answer with the building/floor tracked over '
-                            'the scans (false: each scan alone)'))
-        self.declare_parameter(
-            'tracking_timeout', DEFAULT_TIMEOUT, ParameterDescriptor(
-                description='seconds between scans (header.stamp) after '
-                            'which the tracked belief restarts',
-                floating_point_range=[FloatingPointRange(
-                    from_value=1.0, to_value=1e6)]))
-        self.frame_id = self.declare_parameter(
-            'frame_id', 'map', ParameterDescriptor(
-                description='frame of ~/pose and initialpose; may contain '
-                            '{building} and {floor} (one map per floor)'
-                )).value
-        _check_frame(self.frame_id)
-        self._send_initial_pose = self.declare_parameter(
-            'publish_initial_pose', False, ParameterDescriptor(
-                description='at start-up, send the first confident answer '
-                            'on initialpose (as the service does)',
-                read_only=True)).value
-        self.reseed_on_change = self.declare_parameter(
-            'initial_pose_on_change', False, ParameterDescriptor(
-                description='send every confident answer that changes the '
-                            'building/floor, or whose position jumps, on '
-                            'initialpose')).value
-        jump_threshold = self.declare_parameter(
-            'jump_threshold', 5.0, ParameterDescriptor(
-                description='a jump: the tracked position moved more than '
-                            'this many standard deviations of the previous '
-                            'answer\'s (Mahalanobis distance)',
-                floating_point_range=[FloatingPointRange(
-                    from_value=1.0, to_value=100.0)])).value
+        values = declare(self)
+        model_path = values['model_path'] or str(default_model_path())
+        self.frame_id = values['frame_id']
+        check_frame(self.frame_id)
+        self._send_initial_pose = values['publish_initial_pose']
+        self.reseed_on_change = values['initial_pose_on_change']
+        jump_threshold = values['jump_threshold']
 
         self.model_path = model_path
         model = load_model(model_path)
@@ -187,9 +125,9 @@ class ClassifierNode(Node):
             self.create_service(Trigger, '~/publish_initial_pose',
                                 self._on_publish_initial_pose)
         elif self._send_initial_pose or self.reseed_on_change:
-            raise ValueError(self._no_position('publish_initial_pose' if
-                                               self._send_initial_pose else
-                                               'initial_pose_on_change'))
+            raise ValueError(no_position('publish_initial_pose' if
+                                         self._send_initial_pose else
+                                         'initial_pose_on_change'))
         provenance = self.recognizer.model.provenance
         self.get_logger().info(
             f'model {model_path}: {len(self.recognizer.model.ap_ids)} APs, '
@@ -197,27 +135,12 @@ class ClassifierNode(Node):
             f'{provenance.get("created", "?")})')
 
     # parameters -----------------------------------------------------------
-    @staticmethod
-    def _no_position(name):
-        return (f'{name}: the model has no position output (trained '
-                f'without X, Y)')
-
     def _validate_parameters(self, params):
         for p in params:
-            if p.name in ('min_confidence', 'tracking_timeout',
-                          'jump_threshold') and not math.isfinite(p.value):
-                return SetParametersResult(
-                    successful=False, reason=f'{p.name} must be finite')
-            if p.name == 'initial_pose_on_change' and p.value and \
-                    self.pose_pub is None:
-                return SetParametersResult(
-                    successful=False, reason=self._no_position(p.name))
-            if p.name == 'frame_id':
-                try:
-                    _check_frame(p.value)
-                except ValueError as exc:
-                    return SetParametersResult(successful=False,
-                                               reason=str(exc))
+            reason = refusal(p.name, p.value,
+                             self.recognizer.model.position is not None)
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params):

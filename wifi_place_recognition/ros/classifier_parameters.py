@@ -1,0 +1,98 @@
+"""classifier_node's parameters: names, defaults, ranges and checks."""
+
+import math
+
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
+                                ParameterDescriptor)
+
+from ..core.tracking import DEFAULT_TIMEOUT
+
+
+def _floats(low, high):
+    return [FloatingPointRange(from_value=low, to_value=high)]
+
+
+def _integers(low, high):
+    return [IntegerRange(from_value=low, to_value=high, step=1)]
+
+
+#: (name, default, descriptor) of every parameter, in declaration order.
+PARAMETERS = (
+    ('model_path', '', ParameterDescriptor(
+        description='model file from train_model; empty: the shipped '
+                    'UJIIndoorLoc model', read_only=True)),
+    ('min_confidence', 0.5, ParameterDescriptor(
+        description='below this top-class probability the status is WARN',
+        floating_point_range=_floats(0.0, 1.0))),
+    ('min_known_aps', 3, ParameterDescriptor(
+        description='with fewer APs known to the model the status is WARN',
+        integer_range=_integers(0, 10000))),
+    ('max_aps', 4096, ParameterDescriptor(
+        description='scans listing more APs are rejected',
+        integer_range=_integers(1, 1000000))),
+    ('tracking', False, ParameterDescriptor(
+        description='answer with the building/floor tracked over the scans '
+                    '(false: each scan alone)')),
+    ('tracking_timeout', DEFAULT_TIMEOUT, ParameterDescriptor(
+        description='seconds between scans (header.stamp) after which the '
+                    'tracked belief restarts',
+        floating_point_range=_floats(1.0, 1e6))),
+    ('frame_id', 'map', ParameterDescriptor(
+        description='frame of ~/pose and initialpose; may contain '
+                    '{building} and {floor} (one map per floor)')),
+    ('publish_initial_pose', False, ParameterDescriptor(
+        description='at start-up, send the first confident answer on '
+                    'initialpose (as the service does)', read_only=True)),
+    ('initial_pose_on_change', False, ParameterDescriptor(
+        description='send every confident answer that changes the '
+                    'building/floor, or whose position jumps, on '
+                    'initialpose')),
+    ('jump_threshold', 5.0, ParameterDescriptor(
+        description='a jump: the tracked position moved more than this many '
+                    'standard deviations of the previous answer\'s '
+                    '(Mahalanobis distance)',
+        floating_point_range=_floats(1.0, 100.0))),
+)
+#: Parameters that :meth:`PlaceRecognizer.configure` takes, by name.
+RECOGNIZER_SETTINGS = ('min_confidence', 'min_known_aps', 'max_aps',
+                       'tracking', 'tracking_timeout')
+#: Parameters that need a model with a position output when set.
+NEED_POSITION = ('publish_initial_pose', 'initial_pose_on_change')
+
+
+def declare(node):
+    """Declare every parameter on ``node``; return {name: value}."""
+    return {name: node.declare_parameter(name, default, descriptor).value
+            for name, default, descriptor in PARAMETERS}
+
+
+def no_position(name):
+    """Return why ``name`` cannot be set for a model without positions."""
+    return (f'{name}: the model has no position output (trained without '
+            f'X, Y)')
+
+
+def check_frame(template):
+    """Raise ValueError unless ``template`` formats with building, floor."""
+    try:
+        frame = template.format(building=0, floor=0)
+    except (KeyError, IndexError, ValueError) as exc:
+        raise ValueError(f'frame_id {template!r}: only {{building}} and '
+                         f'{{floor}} may be substituted ({exc!r})') from None
+    if not frame:
+        raise ValueError('frame_id must not be empty')
+
+
+def refusal(name, value, has_position):
+    """Return why ``value`` is refused for parameter ``name``, or None."""
+    if name in ('min_confidence', 'tracking_timeout', 'jump_threshold') \
+            and not math.isfinite(value):
+        return f'{name} must be finite'
+    if name in NEED_POSITION and value and not has_position:
+        return no_position(name)
+    if name == 'frame_id':
+        try:
+            check_frame(value)
+        except ValueError as exc:
+            return str(exc)
+    return None
