@@ -46,8 +46,12 @@ def test_shipped_model_loads_with_its_provenance():
     prov = model.provenance
     assert prov['training_data']['sha256'].startswith('45ca0128')
     assert prov['selection']['grouping'] == 'device'
-    # trained by the documented command: the default recipe
-    assert prov['config'] == json.loads(json.dumps(asdict(TrainConfig())))
+    # trained by the documented command: the default recipe, its batch
+    # size as resolved from the number of scans
+    default = asdict(TrainConfig())
+    default['batch_size'] = TrainConfig().batch_for(
+        prov['training_data']['scans'])
+    assert prov['config'] == json.loads(json.dumps(default))
     assert len(model.members) == TrainConfig().ensemble
     assert model.position.columns == ('LONGITUDE', 'LATITUDE')
     assert 4864000 < model.position.origin[1] < 4866000   # UTM, float64

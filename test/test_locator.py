@@ -20,31 +20,36 @@ def _references(rng, n=300, n_aps=40, n_classes=3):
 
 def _stored(locator, c):
     """Return class ``c``'s references as the locator holds them (dense)."""
-    rows = slice(locator.ap_start[c], locator.ap_start[c + 1])
-    out = np.zeros((locator.class_start[c + 1] - locator.class_start[c],
+    g = locator.group[c]
+    rows = slice(locator.ap_start[g], locator.ap_start[g + 1])
+    out = np.zeros((len(locator.reference_xy(c)),
                     locator.n_aps))
     out[:, locator.ap_column[rows]] = \
-        (locator.blocks[c] * locator.scale[rows, None]).T
+        (locator.blocks[g] * locator.scale[rows, None]).T
     return out
 
 
-@pytest.mark.parametrize('representation, metric', [
-    ('positive', 'euclidean'), ('powed', 'sorensen'),
-    ('exponential', 'euclidean'), ('positive', 'sorensen')])
-def test_locate_is_distance_weighted_knn_within_the_class(representation,
-                                                          metric):
+@pytest.mark.parametrize('representation, metric, group', [
+    ('positive', 'euclidean', None), ('powed', 'sorensen', None),
+    ('exponential', 'euclidean', None), ('positive', 'sorensen', None),
+    ('positive', 'euclidean', [0, 0, 1]), ('powed', 'sorensen', [1, 0, 1])])
+def test_locate_is_distance_weighted_knn_within_the_group(representation,
+                                                          metric, group):
     rng = np.random.default_rng(0)
     rssi, classes, xy = _references(rng)
     for c in range(3):                  # class c never detects AP c
         rssi[classes == c, c] = np.nan
     locator = Locator.build(rssi, classes, xy, 3, neighbours=4,
                             sigma=[1.0, 2.0, 3.0],
-                            representation=representation, metric=metric)
+                            representation=representation, metric=metric,
+                            group=group)
+    group = np.arange(3) if group is None else np.array(group)
     values = signal(rssi, representation)
     for c in range(3):  # int8 references: within half a step of each row
         stored = _stored(locator, c)
-        step = np.abs(values[classes == c]).max(axis=0) / 127
-        assert (np.abs(stored - values[classes == c]) <=
+        mine = group[classes] == group[c]
+        step = np.abs(values[mine]).max(axis=0) / 127
+        assert (np.abs(stored - values[mine]) <=
                 step / 2 * 1.001 + 1e-7).all()
     for _ in range(20):
         query = np.where(rng.random(40) < 0.3, rng.uniform(-100, -40, 40),
@@ -53,7 +58,7 @@ def test_locate_is_distance_weighted_knn_within_the_class(representation,
         columns = np.flatnonzero(~np.isnan(query))
         q = signal(query, representation)
         c = int(rng.integers(0, 3))
-        mine = np.flatnonzero(classes == c)
+        mine = np.flatnonzero(group[classes] == group[c])
         refs = _stored(locator, c)
         if metric == 'euclidean':
             distance = np.linalg.norm(refs - q, axis=1)
@@ -82,7 +87,7 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
     loaded = load_model(tmp_path / 'm.npz').position
     np.testing.assert_array_equal(loaded.origin, model.position.origin)
     assert (loaded.representation, loaded.metric) == ('powed', 'sorensen')
-    for name in ('class_start', 'ap_start', 'ap_column', 'scale', 'codes',
+    for name in ('group_start', 'group', 'ap_start', 'ap_column', 'scale', 'codes',
                  'norms', 'xy', 'sigma'):
         np.testing.assert_array_equal(getattr(loaded, name),
                                       getattr(model.position, name))
@@ -92,7 +97,8 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
             ('ap_column', -1, len(model.ap_ids), 'not ascending'),
             ('codes', 0, 300, 'codes must be integers'),
             ('codes', 0, 0.5, 'codes must be integers'),
-            ('class_start', 1, 10**6, 'inconsistent index')):
+            ('group_start', 1, 10**6, 'inconsistent index'),
+            ('group', 0, len(model.classes), 'one group per class')):
         bad = replace(model.position)
         setattr(bad, name, getattr(bad, name).astype(np.float64))
         getattr(bad, name)[index] = value
@@ -131,7 +137,7 @@ def test_empty_classes_and_scans_sharing_no_ap():
     assert np.isfinite(got).all()
     # a scan sharing no AP with class 0: |query|^2 + |reference|^2
     d = locator.distances(np.array([39]), np.ones(1), 0)
-    first = locator.class_start[0]
+    first = locator.group_start[0]
     np.testing.assert_allclose(
         d ** 2, 1.0 + locator.norms[first:first + len(d)], rtol=1e-5)
 

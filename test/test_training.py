@@ -18,6 +18,7 @@ from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.folds import grouped_folds
 from wifi_place_recognition.training.fitting import best_epoch
+from wifi_place_recognition.training.selection import cross_validate
 from wifi_place_recognition.training.trainer import train
 
 SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
@@ -113,6 +114,33 @@ def test_bad_config_values_are_refused():
         TrainConfig(grouping='test-file')
     with pytest.raises(ValueError, match='folds must be'):
         TrainConfig(folds=1)
+    # 'none' was accepted and silently grouped by time blocks
+    with pytest.raises(ValueError, match='grouping must be one of'):
+        TrainConfig(grouping='none')
+    for option in ('position_representation', 'position_metric',
+                   'position_scope'):
+        with pytest.raises(ValueError, match=option):
+            TrainConfig(**{option: 'nearest'})
+    with pytest.raises(ValueError, match='patience'):
+        TrainConfig(patience=0)
+
+
+def test_selection_stops_patience_epochs_after_the_best(synthetic):
+    fp = read_fingerprints(synthetic[0])
+    classes, y = class_index(fp.building, fp.floor)
+    config = TrainConfig(sae_layers=(32, 16), classifier_layers=(16,),
+                         sae_epochs=1, epochs=30, patience=3, folds=2)
+    s = cross_validate(fp, y, len(classes), config, log=lambda *a: None)
+    assert len(s['mean_curve']) < 30
+    assert len(s['mean_curve']) == s['epochs'] + 3
+    assert len(s['curves'][0]) == len(s['mean_curve'])
+
+
+def test_batch_size_follows_the_number_of_scans():
+    config = TrainConfig()
+    assert [config.batch_for(n) for n in (100, 697, 1476, 3116, 19937)] == \
+        [32, 32, 64, 128, 512]
+    assert TrainConfig(batch_size=100).batch_for(19937) == 100
 
 
 def test_numpy_matches_torch_on_real_data():

@@ -99,7 +99,8 @@ def main(argv=None):
     if 'position_mean_error_m' in s:
         print(f'{where}: position mean error '
               f'{s["position_mean_error_m"]:.2f} m ({s["position_metric"]} '
-              f'distance over the {s["position_representation"]} signal, '
+              f'distance over the {s["position_representation"]} signal '
+              f'among the {s["position_scope"]}\'s references, '
               f'k={s["neighbours"]})')
     if test_fp is not None:
         print_report(evaluate(model, test_fp), model, test_fp.source)

@@ -24,14 +24,15 @@ from .tracking import TrackingParams
 
 FORMAT = 'wifi_place_recognition/model'
 #: 2: the locator's references as int8 blocks; 3: the locator's own signal
-#: representation and distance, and position-only (one-class) models.
+#: representation, distance and reference groups (floor or building), and
+#: position-only (one-class) models.
 SCHEMA_VERSION = 3
 MAX_FILE_BYTES = 256 << 20
 MAX_UNPACKED_BYTES = 1 << 30
 #: The locator's arrays in the file (all float32: indices below 2**24 and
 #: int8 codes are exact).
-LOCATOR_ARRAYS = ('class_start', 'ap_start', 'ap_column', 'scale', 'codes',
-                  'norms', 'xy', 'sigma')
+LOCATOR_ARRAYS = ('group_start', 'group', 'ap_start', 'ap_column', 'scale',
+                  'codes', 'norms', 'xy', 'sigma')
 MAX_INDEX = 1 << 24
 
 
@@ -238,39 +239,44 @@ def _position(header, arrays, n_aps, n_classes):
     a = {name: arrays[f'position.{name}'] for name in LOCATOR_ARRAYS}
     if not all(np.isfinite(v).all() for v in a.values()) or \
             not all((a[i] == np.round(a[i])).all() and (a[i] >= 0).all()
-                    for i in ('class_start', 'ap_start', 'ap_column')):
+                    for i in ('group_start', 'group', 'ap_start',
+                              'ap_column')):
         raise ModelFileError('position: non-finite values or indices that '
                              'are not counts')
-    class_start, ap_start, ap_column = (
-        a[i].astype(np.int64) for i in ('class_start', 'ap_start',
+    group_start, group, ap_start, ap_column = (
+        a[i].astype(np.int64) for i in ('group_start', 'group', 'ap_start',
                                         'ap_column'))
+    if group.shape != (n_classes,) or group.max() >= n_classes:
+        raise ModelFileError('position: one group per class, each a class '
+                             'index, expected')
+    n_groups = int(group.max()) + 1
     n_refs, n_rows = len(a['norms']), len(a['ap_column'])
-    shapes_ok = (class_start.shape == ap_start.shape == (n_classes + 1,)
+    shapes_ok = (group_start.shape == ap_start.shape == (n_groups + 1,)
                  and a['norms'].ndim == a['ap_column'].ndim == 1
                  and a['scale'].shape == (n_rows,) and
                  a['xy'].shape == (n_refs, 2) and
                  a['sigma'].shape == (n_classes,))
-    if not shapes_ok or class_start[0] != 0 or class_start[-1] != n_refs \
+    if not shapes_ok or group_start[0] != 0 or group_start[-1] != n_refs \
             or ap_start[0] != 0 or ap_start[-1] != n_rows or \
-            (np.diff(class_start) < 0).any() or (np.diff(ap_start) < 0).any():
+            (np.diff(group_start) < 0).any() or (np.diff(ap_start) < 0).any():
         raise ModelFileError('position: reference arrays of wrong shape or '
                              'inconsistent index')
-    if a['codes'].shape != (int(np.diff(class_start) @ np.diff(ap_start)),) \
+    if a['codes'].shape != (int(np.diff(group_start) @ np.diff(ap_start)),) \
             or (np.abs(a['codes']) > LEVELS).any() or \
             (a['codes'] != np.round(a['codes'])).any():
         raise ModelFileError(f'position: codes must be integers in '
                              f'[-{LEVELS}, {LEVELS}], one per row and '
-                             f'reference of each class')
-    for c in range(n_classes):
-        mine = ap_column[ap_start[c]:ap_start[c + 1]]
+                             f'reference of each group')
+    for g in range(n_groups):
+        mine = ap_column[ap_start[g]:ap_start[g + 1]]
         if (mine >= n_aps).any() or (np.diff(mine) <= 0).any():
-            raise ModelFileError(f'position: the AP columns of class {c} '
+            raise ModelFileError(f'position: the AP columns of group {g} '
                                  f'are not ascending model columns')
     if (a['sigma'] < 0).any() or (a['scale'] < 0).any():
         raise ModelFileError('position: sigma and scales must be >= 0')
-    return Locator(origin, class_start, ap_start, ap_column, a['scale'],
+    return Locator(origin, group_start, ap_start, ap_column, a['scale'],
                    a['codes'].astype(np.int8), a['norms'], a['xy'],
-                   a['sigma'], n_aps, k, tuple(columns),
+                   a['sigma'], group, n_aps, k, tuple(columns),
                    spec['representation'], spec['metric'])
 
 

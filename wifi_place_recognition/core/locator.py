@@ -34,7 +34,11 @@ LEVELS = 127
 @dataclass
 class Locator:
     """
-    Reference scans with their positions, grouped by class, and k.
+    Reference scans with their positions, in groups, and k.
+
+    Class c searches the references of group ``group[c]``: its own floor
+    (groups = classes), or every floor of its building (a scan's nearest
+    references may lie on the floor above, at the same x, y).
 
     A scan's sigma grows with its distance to the nearest reference (a
     scan unlike every reference is placed less surely): ``sigma[c]``
@@ -44,31 +48,32 @@ class Locator:
     """
 
     origin: np.ndarray    # float64 (2,)
-    class_start: np.ndarray  # int64 (k + 1,): references of class c
-    ap_start: np.ndarray  # int64 (k + 1,): rows of class c in ap_column
+    group_start: np.ndarray  # int64 (g + 1,): references of group g
+    ap_start: np.ndarray  # int64 (g + 1,): rows of group g in ap_column
     ap_column: np.ndarray  # int64: the model AP column of each row
     scale: np.ndarray     # float32: per row, reference input = code * scale
-    codes: np.ndarray     # int8: class by class, (rows, references) blocks
+    codes: np.ndarray     # int8: group by group, (rows, references) blocks
     norms: np.ndarray     # float32 (n_refs,): squared L2 norm (euclidean)
     #                       or L1 norm (sorensen) of each reference
     xy: np.ndarray        # float32 (n_refs, 2): position - origin
     sigma: np.ndarray     # float32 (k,): m per unit of nearest distance
+    group: np.ndarray     # int64 (k,): the group class c searches
     n_aps: int            # width of the model's AP vector
     neighbours: int = 5
     columns: tuple = ('X', 'Y')
     representation: str = 'positive'  # one of preprocessing.SIGNALS
     metric: str = 'euclidean'         # one of METRICS
     blocks: list = field(init=False, repr=False)   # views into codes
-    row_of: np.ndarray = field(init=False, repr=False)  # (k, n_aps), -1
+    row_of: np.ndarray = field(init=False, repr=False)  # (g, n_aps), -1
 
     def __post_init__(self):
-        """Index the blocks: each class's rows by model AP column."""
+        """Index the blocks: each group's rows by model AP column."""
         if self.representation not in SIGNALS or self.metric not in METRICS:
             raise ValueError(f'representation must be one of {SIGNALS} and '
                              f'metric one of {METRICS}, not '
                              f'{self.representation!r}, {self.metric!r}')
-        k = len(self.class_start) - 1
-        refs = np.diff(self.class_start)
+        k = len(self.group_start) - 1
+        refs = np.diff(self.group_start)
         rows = np.diff(self.ap_start)
         ends = np.cumsum(rows * refs)
         self.blocks = [self.codes[end - n * m:end].reshape(n, m)
@@ -82,20 +87,25 @@ class Locator:
     @classmethod
     def build(cls, rssi, classes, xy, n_classes, neighbours=5,
               sigma=None, columns=('X', 'Y'), representation='positive',
-              metric='euclidean'):
+              metric='euclidean', group=None):
         """
         Return a locator of reference scans ``rssi`` (dBm, NaN: undetected).
 
-        ``classes`` is each reference's class index, ``xy`` its position.
+        ``classes`` is each reference's class index, ``xy`` its position;
+        ``group`` the group each class searches (default: its own).
         """
+        group = np.arange(n_classes) if group is None else \
+            np.asarray(group, np.int64)
+        n_groups = int(group.max()) + 1
         inputs = signal(rssi, representation)
-        order = np.argsort(classes, kind='stable')
-        inputs, classes, xy = inputs[order], classes[order], xy[order]
+        groups = group[classes]
+        order = np.argsort(groups, kind='stable')
+        inputs, groups, xy = inputs[order], groups[order], xy[order]
         origin = xy.mean(axis=0)
-        class_start = np.searchsorted(classes, np.arange(n_classes + 1))
+        group_start = np.searchsorted(groups, np.arange(n_groups + 1))
         aps, scales, codes, norms = [], [], [], []
-        for c in range(n_classes):
-            block = inputs[class_start[c]:class_start[c + 1]]
+        for g in range(n_groups):
+            block = inputs[group_start[g]:group_start[g + 1]]
             detected = np.flatnonzero((block != 0).any(axis=0))
             rows = block[:, detected].T.astype(np.float64)
             scale = (np.abs(rows).max(axis=1, initial=0.0) / LEVELS
@@ -109,13 +119,13 @@ class Locator:
                          .sum(axis=0))
         if sigma is None:
             sigma = np.full(n_classes, np.nan)
-        return cls(origin, class_start,
+        return cls(origin, group_start,
                    np.concatenate([[0], np.cumsum([len(a) for a in aps])]),
                    np.concatenate(aps).astype(np.int64),
                    np.concatenate(scales), np.concatenate(codes),
                    np.concatenate(norms).astype(np.float32),
                    (xy - origin).astype(np.float32),
-                   np.asarray(sigma, np.float32), inputs.shape[1],
+                   np.asarray(sigma, np.float32), group, inputs.shape[1],
                    int(neighbours), tuple(columns), representation, metric)
 
     def locate(self, columns, rssi, c, neighbours=None):
@@ -131,32 +141,33 @@ class Locator:
 
     def distances(self, columns, values, c):
         """
-        Return the distance of one scan to each reference of class c.
+        Return the distance of one scan to each reference class c searches.
 
         ``values``: the signal (:attr:`representation`) of the scan's
         detected AP ``columns``.
         """
-        first, last = self.class_start[c], self.class_start[c + 1]
+        g = self.group[c]
+        first, last = self.group_start[g], self.group_start[g + 1]
         if first == last:
             return np.empty(0)
-        rows = self.row_of[c, columns]
+        rows = self.row_of[g, columns]
         shared = rows >= 0
         rows = rows[shared]
-        scale = self.scale[self.ap_start[c] + rows]
+        scale = self.scale[self.ap_start[g] + rows]
         if self.metric == 'sorensen':
-            refs = self.blocks[c][rows] * scale[:, None]
+            refs = self.blocks[g][rows] * scale[:, None]
             common = np.minimum(refs, values[shared, None]).sum(axis=0)
             total = self.norms[first:last] + float(values.sum())
             return 1.0 - 2.0 * common / np.maximum(total, 1e-12)
         dots = (values[shared] * scale) @ \
-            self.blocks[c][rows].astype(np.float32)
+            self.blocks[g][rows].astype(np.float32)
         return np.sqrt(np.maximum(
             self.norms[first:last] + float(np.dot(values, values))
             - 2 * dots, 0.0))
 
     def weighted(self, distance, k, c):
         """
-        Return (xy, sigma) of the ``k`` nearest of class ``c``'s references.
+        Return (xy, sigma) of the ``k`` nearest references of class ``c``.
 
         ``distance`` is from :meth:`distances`; weights are 1 / distance.
         """
@@ -165,9 +176,14 @@ class Locator:
         k = min(k, len(distance))
         nearest = np.argpartition(distance, k - 1)[:k]
         weight = 1.0 / np.maximum(distance[nearest], 1e-6)
-        xy = weight @ self.xy[self.class_start[c] + nearest] / weight.sum()
+        xy = weight @ self.reference_xy(c)[nearest] / weight.sum()
         return self.origin + xy, max(
             float(self.sigma[c] * distance[nearest].min()), MIN_SIGMA)
+
+    def reference_xy(self, c):
+        """Return the positions (- origin) of the references c searches."""
+        g = self.group[c]
+        return self.xy[self.group_start[g]:self.group_start[g + 1]]
 
 
 def calibrated_sigma(errors, nearest, predicted, n_classes, min_scans=30):

@@ -12,6 +12,9 @@ GROUPINGS = ('auto', 'device', 'walk', 'time')
 #: two between these bounds (UJIIndoorLoc and WiFine: 512).
 STEPS_PER_EPOCH = 20
 BATCH_BOUNDS = (32, 512)
+#: Which references a scan's position k-NN searches: those of its
+#: recognised floor, or of every floor of its building.
+SCOPES = ('floor', 'building')
 
 
 @dataclass
@@ -40,12 +43,13 @@ class TrainConfig:
     augment_dropout: float = 0.1  # probability to drop a detected AP
     sae_epochs: int = 10
     epochs: int = 60              # the most; selection stops earlier
-    patience: int = 5             # epochs without a better held-out mean
+    patience: int = 10            # epochs without a better held-out mean
     batch_size: int = 0           # 0: from the number of scans
     learning_rate: float = 3e-3
     neighbours: int = 0           # k of the position k-NN; 0: by the folds
     position_representation: str = ''  # signal of the k-NN; '': by folds
     position_metric: str = ''     # distance of the k-NN; '': by the folds
+    position_scope: str = ''      # floor or building; '': by the folds
     folds: int = 4                # cross-validation folds; 0: no selection
     grouping: str = 'auto'        # what a fold holds out (see selection)
     ensemble: int = 3
@@ -80,6 +84,9 @@ class TrainConfig:
             (self.position_metric in ('',) + METRICS,
              f'position_metric must be one of {METRICS} (or '
              f'empty: chosen by the folds)'),
+            (self.position_scope in ('',) + SCOPES,
+             f'position_scope must be one of {SCOPES} (or empty: chosen by '
+             f'the folds)'),
             (min(self.augment_offset, self.augment_gain, self.augment_noise)
              >= 0 and 0 <= self.augment_dropout < 1,
              'augmentation amounts must be >= 0 (dropout < 1)'),

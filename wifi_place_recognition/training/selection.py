@@ -2,10 +2,12 @@
 Choosing what the folds (or a validation set) can choose.
 
 Each run fits its own scaler and network on the scans it keeps and scores
-the scans it holds out after every epoch: the epoch count is where the
-mean held-out building+floor curve peaks. With positions, each held-out
-scan is then placed among the kept scans of its predicted class: that
-chooses the k-NN's k and calibrates the position sigma per class.
+the scans it holds out after every epoch (the runs side by side, until
+the mean curve stops rising): the epoch count is where the mean held-out
+building+floor curve peaks. With positions, each held-out scan is then
+placed among the kept scans of its predicted class: that chooses the
+k-NN's signal, distance and k, and calibrates the position sigma per
+class. Data of one class skips the networks.
 """
 
 from dataclasses import dataclass, replace
@@ -16,6 +18,7 @@ import torch
 from ..core.locator import calibrated_sigma, Locator, METRICS
 from ..core.preprocessing import signal, SIGNALS
 from ..core.scan import ScanMapper
+from .config import SCOPES
 from .fitting import best_epoch, config_scaler, training_epochs
 from .folds import grouped_folds
 
@@ -182,42 +185,57 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
     for split, classes in zip(splits, predicted):
         keep = split.keep
         detected = [np.flatnonzero(~np.isnan(r)) for r in split.held_rssi]
-        for rep, metric in spaces:
+        for rep, metric, scope in spaces:
             locator = Locator.build(
                 split.fp.rssi[keep], split.y, split.fp.position[keep],
-                n_classes, representation=rep, metric=metric)
+                n_classes, representation=rep, metric=metric,
+                group=_groups(split.fp, split.all_y, n_classes, scope))
             xy, near = zip(*(_positions(locator, ks, cols,
                                         signal(rssi[cols], rep), c)
                              for rssi, cols, c in zip(split.held_rssi,
                                                       detected, classes)))
             xy = np.array(xy)
-            nearest.setdefault((rep, metric), []).append(np.array(near))
+            nearest.setdefault((rep, metric, scope), []).append(
+                np.array(near))
             for i, k in enumerate(ks):
-                errors.setdefault((rep, metric, k), []).append(
+                errors.setdefault((rep, metric, scope, k), []).append(
                     np.linalg.norm(xy[:, i] - split.held_position, axis=1))
     mean = {key: float(np.nanmean(np.concatenate(e)))
             for key, e in errors.items()}
-    rep, metric, k = min(mean, key=mean.get)
-    error = np.concatenate(errors[rep, metric, k])
+    best = min(mean, key=mean.get)
+    rep, metric, scope, k = best
+    error = np.concatenate(errors[best])
     placed = np.isfinite(error)
-    log(f'position: {metric} distance over the {rep} signal, k={k}, '
-        f'held-out mean error {mean[rep, metric, k]:.2f} m')
+    log(f'position: {metric} distance over the {rep} signal among the '
+        f'{scope}\'s references, k={k}, held-out mean error '
+        f'{mean[best]:.2f} m')
     return {'neighbours': k, 'position_representation': rep,
-            'position_metric': metric,
-            'position_mean_error_m': mean[rep, metric, k],
+            'position_metric': metric, 'position_scope': scope,
+            'position_mean_error_m': mean[best],
             'position_median_error_m': float(np.median(error[placed])),
             'sigma_m': calibrated_sigma(
-                error[placed], np.concatenate(nearest[rep, metric])[placed],
+                error[placed],
+                np.concatenate(nearest[rep, metric, scope])[placed],
                 np.concatenate(predicted)[placed], n_classes).tolist()}
 
 
+def _groups(fp, y, n_classes, scope):
+    """Return the reference group of each class for ``scope``."""
+    if scope == 'floor':
+        return np.arange(n_classes)
+    building = np.zeros(n_classes, np.int64)
+    building[y] = fp.building
+    return np.unique(building, return_inverse=True)[1].reshape(-1)
+
+
 def _spaces(config):
-    """Return the (signal, distance) pairs the position CV chooses from."""
+    """Return the (signal, distance, scope) the position CV chooses from."""
     signals = (config.position_representation,) \
         if config.position_representation else SIGNALS
     metrics = (config.position_metric,) if config.position_metric \
         else METRICS
-    return [(r, m) for r in signals for m in metrics]
+    scopes = (config.position_scope,) if config.position_scope else SCOPES
+    return [(r, m, s) for r in signals for m in metrics for s in scopes]
 
 
 def _positions(locator, ks, columns, values, c):
@@ -230,8 +248,8 @@ def _positions(locator, ks, columns, values, c):
     near = near[np.argsort(d[near], kind='stable')]
     weight = 1.0 / np.maximum(d[near], 1e-6)
     total = np.cumsum(weight)
-    xy = np.cumsum(weight[:, None] *
-                   locator.xy[locator.class_start[c] + near], axis=0)
+    xy = np.cumsum(weight[:, None] * locator.reference_xy(c)[near],
+                   axis=0)
     last = np.minimum(ks, n) - 1
     return locator.origin + xy[last] / total[last, None], d[near[0]]
 
@@ -242,4 +260,6 @@ def reference_locator(fp, y, n_classes, selection):
                          selection['neighbours'], selection['sigma_m'],
                          fp.position_columns,
                          selection['position_representation'],
-                         selection['position_metric'])
+                         selection['position_metric'],
+                         _groups(fp, y, n_classes,
+                                 selection['position_scope']))
