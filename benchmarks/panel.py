@@ -36,9 +36,9 @@ import numpy as np
 from sklearn.ensemble import RandomForestClassifier
 
 from wifi_place_recognition.core.atomic import atomic_write
+from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.metrics import accuracies, class_index
 from wifi_place_recognition.core.preprocessing import RssiScaler
-from wifi_place_recognition.core.scan import ScanMapper
 from wifi_place_recognition.data.fingerprints import (
     read_fingerprints, ReaderOptions)
 from wifi_place_recognition.training.config import TrainConfig
@@ -111,7 +111,7 @@ def knn_baselines(train_fp, test_fp):
     fp = train_fp.subset(~train_fp.empty_rows)
     classes, y = class_index(fp.building, fp.floor)
     held = grouped_folds(fp, y, 4, seed=0).held_out
-    test_rssi = ScanMapper(fp.ap_ids).map_rows(test_fp.ap_ids, test_fp.rssi)
+    test_rssi = align(fp, test_fp)
     scores = {}
     for rep in REPRESENTATIONS:
         x = represent(fp.rssi, rep)
@@ -167,7 +167,7 @@ def forest(train_fp, test_fp, seed):
     """Return the test figures of a random forest: 100 trees on dBm."""
     fp = train_fp.subset(~train_fp.empty_rows)
     classes, y = class_index(fp.building, fp.floor)
-    test_rssi = ScanMapper(fp.ap_ids).map_rows(test_fp.ap_ids, test_fp.rssi)
+    test_rssi = align(fp, test_fp)
     model = RandomForestClassifier(100, random_state=seed, n_jobs=1)
     model.fit(represent(fp.rssi, 'positive'), y)
     predicted = classes[model.predict(represent(test_rssi, 'positive'))]

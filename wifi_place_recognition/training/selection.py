@@ -15,9 +15,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
+from ..core.evaluation import align
 from ..core.locator import calibrated_sigma, Locator, METRICS
 from ..core.preprocessing import signal, SIGNALS
-from ..core.scan import ScanMapper
 from .config import SCOPES
 from .fitting import best_epoch, config_scaler, training_epochs
 from .folds import grouped_folds
@@ -77,7 +77,7 @@ def validate(fp, y, classes, validation, config, log=print):
     after every epoch. Its scans must belong to classes of ``fp``; scans
     without any AP known to ``fp`` are left out.
     """
-    rssi = ScanMapper(fp.ap_ids).map_rows(validation.ap_ids, validation.rssi)
+    rssi = align(fp, validation)
     usable = ~np.isnan(rssi).all(axis=1)
     index = {(int(b), int(f)): i for i, (b, f) in enumerate(classes)}
     held_y = np.array([index.get((int(b), int(f)), -1) for b, f in
