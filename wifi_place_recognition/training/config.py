@@ -27,7 +27,10 @@ class TrainConfig:
     undetected APs, one mean/std) plus what cross-validation over held-out
     devices chose (benchmarks/README.md): the exponential representation,
     phone-like augmentation, the epoch count chosen on the mean
-    cross-validated curve, then an ensemble trained on all scans.
+    cross-validated curve, then an ensemble trained on all scans; and
+    what the panel's folds chose: the batch size from the number of
+    scans, a cap the curve does not reach (patience), the position
+    k-NN's scope, signal, distance and k chosen by the folds.
     """
 
     sae_layers: tuple = (256, 128, 64)
