@@ -163,7 +163,7 @@ def stages(fp, passes):
             t2 = clock()
             proba = recognizer.forward(scan.columns, inputs)
             t3 = clock()
-            xy, sigma = model.position.locate(scan.columns, inputs,
+            xy, sigma = model.position.locate(scan.columns, scan.rssi,
                                               int(proba.argmax()))
             t4 = clock()
             tracker.update(t, proba, xy, np.eye(2) * sigma ** 2)

@@ -98,7 +98,10 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
             ('codes', 0, 300, 'codes must be integers'),
             ('codes', 0, 0.5, 'codes must be integers'),
             ('group_start', 1, 10**6, 'inconsistent index'),
-            ('group', 0, len(model.classes), 'one group per class')):
+            ('group', 0, len(model.classes), 'one group per class'),
+            # beyond int64 once cast: must not pass as a small index
+            ('group', 1, 1e30, 'not counts'),
+            ('ap_column', -1, 1e30, 'not counts')):
         bad = replace(model.position)
         setattr(bad, name, getattr(bad, name).astype(np.float64))
         getattr(bad, name)[index] = value

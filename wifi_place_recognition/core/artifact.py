@@ -239,10 +239,11 @@ def _position(header, arrays, n_aps, n_classes):
     a = {name: arrays[f'position.{name}'] for name in LOCATOR_ARRAYS}
     if not all(np.isfinite(v).all() for v in a.values()) or \
             not all((a[i] == np.round(a[i])).all() and (a[i] >= 0).all()
+                    and (a[i] < MAX_INDEX).all()
                     for i in ('group_start', 'group', 'ap_start',
                               'ap_column')):
         raise ModelFileError('position: non-finite values or indices that '
-                             'are not counts')
+                             'are not counts below 2**24')
     group_start, group, ap_start, ap_column = (
         a[i].astype(np.int64) for i in ('group_start', 'group', 'ap_start',
                                         'ap_column'))

@@ -1,11 +1,12 @@
 """
-Position from one scan: k-NN among the recognised floor's reference scans.
+Position from one scan: k-NN among the recognised place's reference scans.
 
 Distance-weighted k-NN among the reference scans of the building/floor the
-classifier recognised, in a non-negative signal representation
+classifier recognised (or of every floor of its building), in a
+non-negative signal representation
 (:func:`.preprocessing.signal`: 0 for an undetected AP, so a scan is
 sparse) with a Euclidean or Sorensen (Bray-Curtis) distance; training
-chooses both, and k, by cross-validation. Each class keeps a dense block
+chooses these, and k, by cross-validation. Each group keeps a dense block
 over the APs its references detect, one row per AP, quantised to int8 with
 a scale per row (a step of 1/127 of the row's largest value; the distances
 are those of the quantised references): a query reads the rows of its own
@@ -72,17 +73,17 @@ class Locator:
             raise ValueError(f'representation must be one of {SIGNALS} and '
                              f'metric one of {METRICS}, not '
                              f'{self.representation!r}, {self.metric!r}')
-        k = len(self.group_start) - 1
+        n_groups = len(self.group_start) - 1
         refs = np.diff(self.group_start)
         rows = np.diff(self.ap_start)
         ends = np.cumsum(rows * refs)
         self.blocks = [self.codes[end - n * m:end].reshape(n, m)
                        for end, n, m in zip(ends, rows, refs)]
-        self.row_of = np.full((k, self.n_aps), -1, np.int32)
-        for c in range(k):
-            self.row_of[c, self.ap_column[self.ap_start[c]:
-                                          self.ap_start[c + 1]]] = \
-                np.arange(rows[c])
+        self.row_of = np.full((n_groups, self.n_aps), -1, np.int32)
+        for g in range(n_groups):
+            self.row_of[g, self.ap_column[self.ap_start[g]:
+                                          self.ap_start[g + 1]]] = \
+                np.arange(rows[g])
 
     @classmethod
     def build(cls, rssi, classes, xy, n_classes, neighbours=5,

@@ -136,8 +136,9 @@ def _select_epochs(splits, n_classes, config, log):
     Return the epoch summary and each split's classes at that epoch.
 
     The splits' networks train side by side, an epoch at a time, until the
-    smoothed mean held-out curve has not risen for ``config.patience``
-    epochs (or ``config.epochs`` are done).
+    peak of the smoothed mean held-out curve (the centre of its best
+    3-epoch window) lies ``config.patience`` epochs back (or
+    ``config.epochs`` are done).
     """
     runs = []
     for k, split in enumerate(splits):
@@ -159,9 +160,9 @@ def _select_epochs(splits, n_classes, config, log):
                            for split, predicted in zip(splits, predictions)])
         mean = curves.mean(axis=0)
         best = best_epoch(mean)
-        if epoch - best >= config.patience:
-            log(f'no better held-out mean for {config.patience} epochs: '
-                f'stopped after {epoch + 1}')
+        if epoch - best >= config.patience:   # best: a window's centre
+            log(f'the smoothed held-out mean peaked {config.patience} '
+                f'epochs back, at {best + 1}: stopped after {epoch + 1}')
             break
     return ({'curves': np.round(curves, 5).tolist(),
              'mean_curve': np.round(mean, 5).tolist(), 'epochs': best + 1,
