@@ -90,26 +90,28 @@ def test_scanner_node_stays_responsive_while_iw_hangs(
                                   diags.append, RELIABLE)
     node = NodeProcess(tmp_path, python_module(
         'ros.wifi_scanner_node', '--ros-args', '-p', 'interface:=lo', '-p',
-        'period:=0.5', '-p', 'sources:=[iw]'), 'scanner_hang')
+        'period:=1.0', '-p', 'sources:=[iw]'), 'scanner_hang')
     client = Client(ros, 'scanner_hang')
     try:
         assert wait_until(lambda: client.params.service_is_ready(), 20, ros)
         # While the first scan hangs: statuses keep coming, parameters work.
         assert wait_until(lambda: pids.exists(), 10, ros)
-        t0 = time.monotonic()
         assert client.set_param('max_age', 3.0).successful
-        # well before the hanging command's 2.5 s timeout ends
-        assert time.monotonic() - t0 < 2.0
+        # answered while the scan still hangs: before its 5 s timeout
+        # ended it with an ERROR status (not a wall-clock bound: the
+        # machine may be busy)
+        wait_until(lambda: False, 0.2, ros)     # deliver what arrived
+        assert not _statuses(diags, 'scanner_hang', DiagnosticStatus.ERROR)
         assert wait_until(lambda: any(
             float(status_values(s)['scan_running_s']) >= 1.0
             for s in _statuses(diags, 'scanner_hang')), 5, ros)
-        # The 2.5 s timeout (5 periods) ends it with the reason.
+        # The 5 s timeout (5 periods) ends it with the reason.
         assert wait_until(lambda: _statuses(
-            diags, 'scanner_hang', DiagnosticStatus.ERROR), 10, ros)
+            diags, 'scanner_hang', DiagnosticStatus.ERROR), 15, ros)
         error = _statuses(diags, 'scanner_hang', DiagnosticStatus.ERROR)[0]
-        assert 'took more than 2.5 s' in error.message
+        assert 'took more than 5 s' in error.message
         # Stopped while the next scan hangs: a quick, clean exit.
-        assert wait_until(lambda: len(pids.read_text().split()) >= 2, 10,
+        assert wait_until(lambda: len(pids.read_text().split()) >= 2, 15,
                           ros)
     finally:
         client.close()
@@ -117,7 +119,7 @@ def test_scanner_node_stays_responsive_while_iw_hangs(
         t0 = time.monotonic()
         code, log = node.stop()
     assert code == 0 and 'Traceback' not in log, log
-    assert time.monotonic() - t0 < 5
+    assert time.monotonic() - t0 < 10
     children = [int(p) for p in pids.read_text().split()]
     assert wait_until(lambda: not any(map(process_alive, children)), 5), children
 
