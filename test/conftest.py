@@ -154,6 +154,18 @@ def synthetic(tmp_path_factory):
     return csv_path, model_path
 
 
+@pytest.fixture(scope='session')
+def surveyed_model(tmp_path_factory):
+    """Return the path of a model with positions (surveyed_csv's floors)."""
+    folder = tmp_path_factory.mktemp('surveyed')
+    model = folder / 'model.npz'
+    result = run(python_module(
+        'cli.train_model', '--data', surveyed_csv(folder / 'a.csv'), '-o',
+        model, *FAST, '--epochs', '20'))
+    assert result.returncode == 0, result.stderr
+    return model
+
+
 def run(args, **kwargs):
     """Run a command with the whole environment; return CompletedProcess."""
     kwargs.setdefault('timeout', 300)

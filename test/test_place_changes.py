@@ -7,7 +7,7 @@ a jump of the tracked position; the recognizer's one way to be
 reconfigured.
 """
 
-from conftest import FAST, mac, python_module, run, surveyed_csv, wait_until
+from conftest import mac, python_module, run, wait_until
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
 import numpy as np
@@ -24,18 +24,6 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: surveyed_csv's offset of the positions (metres).
 ORIGIN = np.array([-7600.0, 4864900.0])
-
-
-@pytest.fixture(scope='module')
-def located(tmp_path_factory):
-    """Return the path of a model with positions (surveyed_csv's floors)."""
-    folder = tmp_path_factory.mktemp('located')
-    model = folder / 'model.npz'
-    result = run(python_module(
-        'cli.train_model', '--data', surveyed_csv(folder / 'a.csv'), '-o',
-        model, *FAST, '--epochs', '20'))
-    assert result.returncode == 0, result.stderr
-    return model
 
 
 class Building:
@@ -64,9 +52,9 @@ CHANGE, JUMP = 8, 16     # the scans where the floor changes, the jump
 
 
 def test_a_walk_that_changes_floor_reseeds_nav2_and_latches_the_place(
-        ros, tmp_path, located):
+        ros, tmp_path, surveyed_model):
     building = Building()
-    with running_node(ros, tmp_path, located, 'nav_node', '-p',
+    with running_node(ros, tmp_path, surveyed_model, 'nav_node', '-p',
                       'tracking:=true', '-p', 'initial_pose_on_change:=true',
                       '-p', f'frame_id:={FRAME}') as (client, proc, _):
         places, initial = [], []
@@ -127,9 +115,9 @@ def test_a_walk_that_changes_floor_reseeds_nav2_and_latches_the_place(
 
 
 def test_a_rejected_scan_gives_no_pose_and_changes_nothing(
-        ros, tmp_path, located):
+        ros, tmp_path, surveyed_model):
     building = Building()
-    with running_node(ros, tmp_path, located, 'jump_node', '-p',
+    with running_node(ros, tmp_path, surveyed_model, 'jump_node', '-p',
                       'initial_pose_on_change:=true', '-p',
                       'publish_initial_pose:=true') as (client, *_):
         poses = []
@@ -161,8 +149,8 @@ def test_reseeding_needs_a_model_with_positions(synthetic):
         'position output' in result.stderr, result.stderr
 
 
-def test_the_recognizer_is_reconfigured_by_one_method(located):
-    recognizer = PlaceRecognizer(load_model(located))
+def test_the_recognizer_is_reconfigured_by_one_method(surveyed_model):
+    recognizer = PlaceRecognizer(load_model(surveyed_model))
     names = [mac(i) for i in range(6)]
     recognizer.configure(max_aps=5, min_known_aps=7, min_confidence=0.0)
     with pytest.raises(ScanRejected):

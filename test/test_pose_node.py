@@ -16,17 +16,12 @@ FRAME = 'b{building}_floor{floor}'
 
 
 @pytest.fixture(scope='module')
-def located(tmp_path_factory):
+def located(surveyed_model, tmp_path_factory):
     """Return (model path, test fingerprints) of a model with positions."""
     folder = tmp_path_factory.mktemp('located')
-    model = folder / 'model.npz'
-    result = run(python_module(
-        'cli.train_model', '--data', surveyed_csv(folder / 'a.csv'), '-o',
-        model, *FAST, '--epochs', '20'))
-    assert result.returncode == 0, result.stderr
     test = read_fingerprints(surveyed_csv(folder / 'b.csv', scans_seed=1,
                                           scans_per_floor=10))
-    return model, test
+    return surveyed_model, test
 
 
 class Poses:
