@@ -38,7 +38,8 @@ from sklearn.ensemble import RandomForestClassifier
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.metrics import accuracies, class_index
-from wifi_place_recognition.core.preprocessing import RssiScaler
+from wifi_place_recognition.core.locator import METRICS
+from wifi_place_recognition.core.preprocessing import signal, SIGNALS
 from wifi_place_recognition.data.fingerprints import (
     read_fingerprints, ReaderOptions)
 from wifi_place_recognition.training.config import TrainConfig
@@ -50,16 +51,6 @@ from runs import summary, train_and_test
 ROOT = Path(__file__).resolve().parent.parent
 ALL = PANEL + ('ujiindoorloc', 'wifine')
 KS = (1, 3, 5, 7, 9, 11)
-REPRESENTATIONS = ('positive', 'powed', 'exponential')
-METRICS = ('euclidean', 'sorensen')
-
-
-def represent(rssi, name):
-    """Return a non-negative representation: 0 for an undetected AP."""
-    if name == 'positive':
-        return np.fmax(RssiScaler(-110.0, 'joint', 'dbm').fill(rssi) + 110,
-                       0).astype(np.float32)
-    return RssiScaler(-110.0, 'joint', name).fill(rssi)
 
 
 def neighbours(ref, queries, metric, kmax=max(KS)):
@@ -113,8 +104,8 @@ def knn_baselines(train_fp, test_fp):
     held = grouped_folds(fp, y, 4, seed=0).held_out
     test_rssi = align(fp, test_fp)
     scores = {}
-    for rep in REPRESENTATIONS:
-        x = represent(fp.rssi, rep)
+    for rep in SIGNALS:
+        x = signal(fp.rssi, rep)
         for metric in METRICS:
             right = {k: 0 for k in KS}
             error = {k: 0.0 for k in KS}
@@ -134,7 +125,7 @@ def knn_baselines(train_fp, test_fp):
                 scores[rep, metric, k] = (right[k] / n, error[k] / n)
     out = {}
     rep, metric, k = max(scores, key=lambda c: scores[c][0])
-    x, t = represent(fp.rssi, rep), represent(test_rssi, rep)
+    x, t = signal(fp.rssi, rep), signal(test_rssi, rep)
     idx, dist = neighbours(x, t, metric)
     predicted = classes[knn_predict(idx, dist, k, y,
                                     n_classes=len(classes))]
@@ -144,7 +135,7 @@ def knn_baselines(train_fp, test_fp):
                        rep, metric, k][0])
     if fp.position is not None and test_fp.position is not None:
         rep, metric, k = min(scores, key=lambda c: scores[c][1])
-        x, t = represent(fp.rssi, rep), represent(test_rssi, rep)
+        x, t = signal(fp.rssi, rep), signal(test_rssi, rep)
         idx, dist = neighbours(x, t, metric)
         xy = knn_predict(idx, dist, k, xy=fp.position)
         error = np.linalg.norm(xy - test_fp.position, axis=1)
@@ -153,8 +144,8 @@ def knn_baselines(train_fp, test_fp):
             'position_median_error_m': float(np.median(error)),
             'cv_position_mean_error_m': scores[rep, metric, k][1]}
         five = min(5, len(fp))
-        idx, dist = neighbours(represent(fp.rssi, 'positive'),
-                               represent(test_rssi, 'positive'),
+        idx, dist = neighbours(signal(fp.rssi, 'positive'),
+                               signal(test_rssi, 'positive'),
                                'euclidean', five)
         xy = knn_predict(idx, dist, five, xy=fp.position)
         out['k-NN position (euclidean, dBm, k=5)'] = {
@@ -169,8 +160,8 @@ def forest(train_fp, test_fp, seed):
     classes, y = class_index(fp.building, fp.floor)
     test_rssi = align(fp, test_fp)
     model = RandomForestClassifier(100, random_state=seed, n_jobs=1)
-    model.fit(represent(fp.rssi, 'positive'), y)
-    predicted = classes[model.predict(represent(test_rssi, 'positive'))]
+    model.fit(signal(fp.rssi, 'positive'), y)
+    predicted = classes[model.predict(signal(test_rssi, 'positive'))]
     return accuracies(test_fp.building, test_fp.floor, predicted[:, 0],
                       predicted[:, 1])
 

@@ -174,12 +174,26 @@ class Locator:
         """
         if not len(distance):
             return np.full(2, np.nan), float('nan')
-        k = min(k, len(distance))
-        nearest = np.argpartition(distance, k - 1)[:k]
-        weight = 1.0 / np.maximum(distance[nearest], 1e-6)
-        xy = weight @ self.reference_xy(c)[nearest] / weight.sum()
-        return self.origin + xy, max(
-            float(self.sigma[c] * distance[nearest].min()), MIN_SIGMA)
+        xy, nearest = self.positions(distance, (k,), c)
+        return xy[0], max(float(self.sigma[c] * nearest), MIN_SIGMA)
+
+    def positions(self, distance, ks, c):
+        """
+        Return the k-NN position of every k of ``ks``, and the nearest distance.
+
+        The distance-weighted mean of the k nearest references of class
+        ``c`` (1 / distance weights), for each k of ``ks`` at once.
+        """
+        if not len(distance):
+            return np.full((len(ks), 2), np.nan), np.nan
+        n = min(max(ks), len(distance))
+        near = np.argpartition(distance, n - 1)[:n]
+        near = near[np.argsort(distance[near], kind='stable')]
+        weight = 1.0 / np.maximum(distance[near], 1e-6)
+        xy = np.cumsum(weight[:, None] * self.reference_xy(c)[near], axis=0)
+        last = np.minimum(ks, n) - 1
+        return (self.origin + xy[last] / np.cumsum(weight)[last, None],
+                float(distance[near[0]]))
 
     def reference_xy(self, c):
         """Return the positions (- origin) of the references c searches."""

@@ -191,10 +191,10 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
                 split.fp.rssi[keep], split.y, split.fp.position[keep],
                 n_classes, representation=rep, metric=metric,
                 group=_groups(split.fp, split.all_y, n_classes, scope))
-            xy, near = zip(*(_positions(locator, ks, cols,
-                                        signal(rssi[cols], rep), c)
-                             for rssi, cols, c in zip(split.held_rssi,
-                                                      detected, classes)))
+            xy, near = zip(*(locator.positions(locator.distances(
+                cols, signal(rssi[cols], rep), c), ks, c)
+                for rssi, cols, c in zip(split.held_rssi, detected,
+                                         classes)))
             xy = np.array(xy)
             nearest.setdefault((rep, metric, scope), []).append(
                 np.array(near))
@@ -237,22 +237,6 @@ def _spaces(config):
         else METRICS
     scopes = (config.position_scope,) if config.position_scope else SCOPES
     return [(r, m, s) for r in signals for m in metrics for s in scopes]
-
-
-def _positions(locator, ks, columns, values, c):
-    """Return one scan's positions (one per k) and nearest distance."""
-    d = locator.distances(columns, values, c)
-    if not len(d):
-        return np.full((len(ks), 2), np.nan), np.nan
-    n = min(max(ks), len(d))
-    near = np.argpartition(d, n - 1)[:n]
-    near = near[np.argsort(d[near], kind='stable')]
-    weight = 1.0 / np.maximum(d[near], 1e-6)
-    total = np.cumsum(weight)
-    xy = np.cumsum(weight[:, None] * locator.reference_xy(c)[near],
-                   axis=0)
-    last = np.minimum(ks, n) - 1
-    return locator.origin + xy[last] / total[last, None], d[near[0]]
 
 
 def reference_locator(fp, y, n_classes, selection):
