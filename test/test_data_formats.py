@@ -355,6 +355,25 @@ def test_positions_keep_float64_and_a_missing_one_is_refused():
     assert ignored.position is None and ignored.ap_ids == ('WAP1',)
 
 
+def test_robot_run_rows_without_a_pose_are_left_out_and_yaw_is_no_ap():
+    """A robot run's scans.csv: empty X, Y before the first pose; YAW."""
+    text = ('TIMESTAMP,X,Y,YAW,aa:bb:cc:dd:ee:01,aa:bb:cc:dd:ee:02,'
+            'BUILDINGID,FLOOR\n'
+            '10.5,,,,-60,100,0,0\n'
+            '11.5,1.25,-2.5,-2.9,-61,-70,0,0\n'
+            '12.5,1.5,-2.25,-3.1,-65,-72,0,0\n'
+            '13.5,1.75,-2.0,-1.5,100,-75,0,0\n')
+    fp = parse(text)
+    assert fp.ap_ids == ('aa:bb:cc:dd:ee:01', 'aa:bb:cc:dd:ee:02')
+    assert fp.line.tolist() == [3, 4, 5]
+    assert fp.position[:, 0].tolist() == [1.25, 1.5, 1.75]
+    assert fp.meta['YAW'].astype(float).tolist() == [-2.9, -3.1, -1.5]
+    assert fp.notes == ['f.csv: 1 row(s) with empty X and Y left out '
+                        '(rows 2)']
+    with pytest.raises(DataError, match="row 3, column Y: value '' is not"):
+        parse(text.replace('1.25,-2.5', '1.25,'))
+
+
 # the real WiFine folders and the command line ----------------------------------
 
 def wifine(split):

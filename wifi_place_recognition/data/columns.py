@@ -28,9 +28,11 @@ from ..core.scan import normalize_ap_id
 from .files import DataError
 from .table import is_number, read_header, Table
 
-#: UJIIndoorLoc's metadata columns (and the recorder's): never APs.
+#: UJIIndoorLoc's metadata columns (and the recorder's and robot runs'
+#: heading, ``YAW``): never APs.
 META_COLUMNS = ('LONGITUDE', 'LATITUDE', 'FLOOR', 'BUILDINGID', 'SPACEID',
-                'RELATIVEPOSITION', 'USERID', 'PHONEID', 'TIMESTAMP', 'FRAME')
+                'RELATIVEPOSITION', 'USERID', 'PHONEID', 'TIMESTAMP', 'FRAME',
+                'YAW')
 #: Position columns looked for, in this order, unless named.
 POSITION_PAIRS = (('LONGITUDE', 'LATITUDE'), ('X', 'Y'))
 #: ``Fingerprints.meta`` keys of the device and time columns.
@@ -52,7 +54,7 @@ class FileColumns:
         self.header = read_header(text, name)
         self._roles(options)
         textual = [j for j in (self.device, self.time) if j is not None] + \
-            self.meta
+            self.meta + list(self.position or ())   # may have empty cells
         self.table = Table(text, name, self.header, textual)
         c = self.candidates      # a view when they are side by side
         numbers = self.table.numbers

@@ -213,15 +213,25 @@ def _finish(t, ap_names, not_detected, source, notes):
     if t.time is not None:
         meta[TIME] = cells.times(t.time)
     position, position_columns = None, ()
+    unplaced = np.zeros(len(cells.lines), bool)
     if t.position is not None:
-        position = np.stack([cells.numeric(j) for j in t.position], axis=1)
+        unplaced = np.logical_and.reduce([cells.blank(j)
+                                          for j in t.position])
+        position = np.stack([cells.numeric(j, skip=unplaced)
+                             for j in t.position], axis=1)
         position_columns = tuple(t.header[j] for j in t.position)
     building = np.zeros(len(cells.lines), np.int64) if t.building is None \
         else cells.label(t.building)
-    return Fingerprints(ids, rssi.astype(np.float32), building,
-                        cells.label(t.floor), meta, t.name, clipped,
-                        position=position, position_columns=position_columns,
-                        line=cells.lines)
+    fp = Fingerprints(ids, rssi.astype(np.float32), building,
+                      cells.label(t.floor), meta, t.name, clipped,
+                      position=position, position_columns=position_columns,
+                      line=cells.lines)
+    if unplaced.any():
+        notes.append(f'{source}: {int(unplaced.sum())} row(s) with empty '
+                     f'{" and ".join(position_columns)} left out (rows '
+                     f'{few(map(str, cells.lines[unplaced]))})')
+        fp = fp.subset(~unplaced)
+    return fp
 
 
 def _merge(parts, walks, source, sha256, notes):

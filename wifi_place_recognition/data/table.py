@@ -3,6 +3,7 @@
 import csv
 from datetime import datetime, timezone
 import io
+import math
 import operator
 import warnings
 
@@ -46,14 +47,30 @@ class Table:
         raise DataError(f'{self.name}: row {self.lines[row]}, column '
                         f'{self.header[j]}: {problem}')
 
-    def numeric(self, j):
-        """Return column ``j`` as finite float64 numbers, or fail."""
+    def blank(self, j):
+        """Return a mask of the rows whose cell of column ``j`` is empty."""
+        cells = self.texts.get(j)
+        if cells is None:
+            return np.zeros(len(self.lines), bool)
+        return np.array([c == '' for c in cells], bool)
+
+    def numeric(self, j, skip=None):
+        """
+        Return column ``j`` as finite float64 numbers, or fail.
+
+        Rows of the mask ``skip`` are not read: NaN.
+        """
+        skip = np.zeros(len(self.lines), bool) if skip is None else skip
         if j in self.texts:
             cells = self.texts[j]
-            bad = next(r for r, c in enumerate(cells) if not is_number(c))
-            self.fail(bad, j, f'value {cells[bad]!r} is not a number')
-        values = self.numbers[:, j]
-        bad = ~np.isfinite(values)
+            bad = next((r for r, c in enumerate(cells)
+                        if not skip[r] and not is_number(c)), None)
+            if bad is not None:
+                self.fail(bad, j, f'value {cells[bad]!r} is not a number')
+            return np.array([math.nan if s else float(c)
+                             for c, s in zip(cells, skip)])
+        values = np.where(skip, math.nan, self.numbers[:, j])
+        bad = ~(np.isfinite(values) | skip)
         if bad.any():
             r = int(np.argmax(bad))
             self.fail(r, j, f'value {values[r]:g} is not a finite number')
