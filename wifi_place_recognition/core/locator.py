@@ -21,7 +21,7 @@ import numpy as np
 from .preprocessing import signal, SIGNALS
 
 #: Distances the k-NN can use: Euclidean, or Sorensen (Bray-Curtis),
-#: sum |q - r| / sum (q + r).
+#: sum(abs(q - r)) / sum(q + r).
 METRICS = ('euclidean', 'sorensen')
 
 #: Radius of the 95 % circle of a 2-D isotropic Gaussian, in sigmas.
