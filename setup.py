@@ -11,6 +11,8 @@ console_scripts = [
     'classifier_node = wifi_place_recognition.ros.executables:classifier_node',
     'replay_scans = wifi_place_recognition.cli.replay_scans:main',
     'fit_tracking = wifi_place_recognition.cli.fit_tracking:main',
+    'fit_odometry = wifi_place_recognition.cli.fit_odometry:main',
+    'replay_run = wifi_place_recognition.cli.replay_run:main',
     'wifi_scanner_node = '
     'wifi_place_recognition.ros.executables:wifi_scanner_node',
     'record_fingerprints = '

@@ -1,5 +1,7 @@
 """Conversions between ROS messages and plain Python values."""
 
+import math
+
 from diagnostic_msgs.msg import KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from sensor_msgs.msg import JointState
@@ -25,21 +27,40 @@ def key_value(key, value):
     return KeyValue(key=key, value=str(value))
 
 
-def pose_message(xy, cov, stamp, frame_id):
-    """Return a PoseWithCovarianceStamped at x, y with their 2x2 ``cov``."""
+def pose_message(xy, cov, stamp, frame_id, yaw=None):
+    """
+    Return a PoseWithCovarianceStamped at x, y (and ``yaw``, rad).
+
+    ``cov``: 2x2 over x, y; with ``yaw``, 3x3 over x, y, yaw. Without a
+    yaw, its variance is :data:`UNKNOWN_VARIANCE`.
+    """
     pose = PoseWithCovarianceStamped()
     pose.header.stamp = stamp
     pose.header.frame_id = frame_id
     pose.pose.pose.position.x = float(xy[0])
     pose.pose.pose.position.y = float(xy[1])
-    pose.pose.pose.orientation.w = 1.0
+    cov = np.asarray(cov, float)
     covariance = [0.0] * 36
-    (covariance[0], covariance[1]), (covariance[6], covariance[7]) = \
-        np.asarray(cov, float).tolist()
     for i in (14, 21, 28, 35):  # z, roll, pitch, yaw: unknown
         covariance[i] = UNKNOWN_VARIANCE
+    rows = (0, 1) if yaw is None else (0, 1, 5)   # x, y, yaw of the 6x6
+    for a, i in enumerate(rows):
+        for b, j in enumerate(rows):
+            covariance[6 * i + j] = float(cov[a, b])
+    if yaw is None:
+        pose.pose.pose.orientation.w = 1.0
+    else:
+        pose.pose.pose.orientation.z = math.sin(yaw / 2)
+        pose.pose.pose.orientation.w = math.cos(yaw / 2)
     pose.pose.covariance = covariance
     return pose
+
+
+def yaw_of(orientation):
+    """Return the yaw (rad) of a quaternion (rotation about z)."""
+    q = orientation
+    return math.atan2(2 * (q.w * q.z + q.x * q.y),
+                      1 - 2 * (q.y * q.y + q.z * q.z))
 
 
 def status_values(status):

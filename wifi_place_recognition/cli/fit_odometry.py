@@ -1,0 +1,85 @@
+"""``fit_odometry``: fit the odometry fusion's drift on a surveyed run."""
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from ..core.artifact import load_model, save_model
+from ..core.atomic import atomic_write
+from ..core.odometry_fit import fit_odometry
+from ..core.particles import FusionParams
+from ..data.poses import read_poses
+from .common import add_data_arguments, data_options, main_wrapper, read_data
+
+
+@main_wrapper
+def main(argv=None):
+    """Fit, write the model file's fusion section; exit 2 on bad input."""
+    p = argparse.ArgumentParser(
+        allow_abbrev=False, prog='fit_odometry',
+        description='Fit the heading drift of the robot\'s odometry on a run '
+                    'recorded with its localiser running (scans with X, Y, '
+                    'YAW and TIMESTAMP, and the odometry beside them, as '
+                    'record_fingerprints writes with pose_topic and '
+                    'odom_topic) and write it into the model file\'s fusion '
+                    'section, which classifier_node uses when odometry '
+                    'flows.')
+    p.add_argument('--model', type=Path, required=True,
+                   help='model file from train_model (rewritten unless '
+                        '-o is given)')
+    p.add_argument('--data', nargs='+', required=True, metavar='PATH',
+                   help='the run\'s scans: CSV with TIMESTAMP, X, Y, YAW '
+                        '(the survey the model was trained on will do)')
+    p.add_argument('--odometry', type=Path, required=True, metavar='CSV',
+                   help='the run\'s odometry: TIMESTAMP, X, Y, YAW')
+    p.add_argument('-o', '--output', type=Path,
+                   help='write the model with its fusion section here '
+                        'instead')
+    p.add_argument('--window', type=float, default=3.0, metavar='M',
+                   help='metres of travel per stretch (default: '
+                        '%(default)s)')
+    p.add_argument('--report', type=Path, metavar='OUT.json',
+                   help='also write what was measured')
+    add_data_arguments(p)
+    args = p.parse_args(argv)
+    if not args.window > 0:
+        p.error('--window must be > 0')
+    model = load_model(args.model)
+    if model.position is None:
+        raise ValueError(f'{args.model}: the model has no position output; '
+                         f'fusion needs one (train with X, Y)')
+    fp = read_data(args.data, data_options(args), 'run')
+    if fp.position is None or 'YAW' not in fp.meta or \
+            'TIMESTAMP' not in fp.meta:
+        raise ValueError(f'{fp.source}: fitting needs TIMESTAMP, X, Y and '
+                         f'YAW columns (the localiser\'s pose at each scan)')
+    odometry = read_poses(args.odometry)
+    params, report = fit_odometry(
+        odometry, fp.meta['TIMESTAMP'], fp.position,
+        fp.meta['YAW'].astype(float), model.fusion or FusionParams(),
+        args.window)
+    report.update(run=fp.source, run_sha256=fp.sha256,
+                  odometry=str(args.odometry),
+                  created=time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()))
+    params.fit.update(report)
+    model.fusion = params
+    out = args.output or args.model
+    save_model(model, out)
+    print(f'{fp.source}: {report["scans"]} posed scans, '
+          f'{report["distance_m"]:.1f} m driven in {report["windows"]} '
+          f'stretches; odometry distance / true distance '
+          f'{report["odometry_distance_ratio"]:.4f}')
+    print(f'heading drift {report["drift_deg_per_m"]:+.3f} deg/m '
+          f'(+- {report["drift_sd_deg_per_m"]:.3f}; stretches spread '
+          f'{report["window_drift_deg_per_m_sd"]:.2f})')
+    if args.report:
+        with atomic_write(args.report, 'w') as f:
+            json.dump(report, f, indent=1)
+    print(f'wrote {out}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,130 @@
+"""``replay_run``: a robot run (scans + odometry) through the node, scored."""
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from rclpy.executors import ExternalShutdownException
+
+from ..core.atomic import atomic_write
+from ..core.trajectory import dead_reckoning, score, truth_at
+from ..data.poses import read_poses
+from ..ros.run_replayer import arrays, replay_run, RunReplayOptions
+from .common import add_data_arguments, data_options, main_wrapper, read_data
+
+#: What each column of the printed table is.
+WHO = (('single', 'each scan alone'),
+       ('odometry', 'odometry alone from the first true pose'),
+       ('fused', 'the node\'s ~/pose'))
+ROWS = (('mean_m', 'mean error (m)'), ('median_m', 'median error (m)'),
+        ('p95_m', 'p95 error (m)'), ('max_m', 'max error (m)'),
+        ('below_2m_from_s', 'below 2 m from (s)'),
+        ('max_after_settle_m', 'max error after 30 s (m)'),
+        ('yaw_median_deg_after_settle', 'median yaw error (deg)'),
+        ('in_95_ellipse', 'in the 95 % ellipse'))
+
+
+@main_wrapper
+def main(argv=None):
+    """Replay a run through a running classifier_node; print the scores."""
+    p = argparse.ArgumentParser(
+        allow_abbrev=False, prog='replay_run',
+        description='Publish a robot run\'s scans (wifi/scan) and odometry '
+                    '(odom) in stamp order to a running classifier_node and '
+                    'score its poses (~/pose) against the truth: each scan '
+                    'alone, odometry alone and the fused pose side by '
+                    'side.')
+    p.add_argument('--data', nargs='+', required=True, metavar='PATH',
+                   help='the run\'s scans: a CSV with TIMESTAMP (and X, Y, '
+                        'YAW as truth unless --truth is given)')
+    p.add_argument('--odometry', type=Path, required=True, metavar='CSV',
+                   help='the run\'s odometry: TIMESTAMP, X, Y, YAW')
+    p.add_argument('--truth', type=Path, metavar='CSV',
+                   help='true poses (TIMESTAMP, X, Y, YAW), interpolated '
+                        'to the scans (default: the scans\' X, Y, YAW)')
+    p.add_argument('--speed', type=float, default=10.0,
+                   help='times the recorded pace (default: %(default)s)')
+    p.add_argument('--wait', type=float, default=15.0,
+                   help='seconds to wait for the node to appear')
+    p.add_argument('--place-topic', default='/classifier_node/place')
+    p.add_argument('--pose-topic', default='/classifier_node/pose')
+    p.add_argument('--json', type=Path, metavar='OUT.json',
+                   help='also write the scores')
+    p.add_argument('--trajectory', type=Path, metavar='OUT.csv',
+                   help='write each scan\'s truth, single-scan, odometry '
+                        'and fused pose')
+    add_data_arguments(p)
+    args, ros_args = p.parse_known_args(argv)
+    fp = read_data(args.data, data_options(args), 'run', role='test')
+    if 'TIMESTAMP' not in fp.meta:
+        p.error(f'{fp.source} has no TIMESTAMP column')
+    odometry = read_poses(args.odometry)
+    truth = truth_at(read_poses(args.truth), fp.meta['TIMESTAMP']) \
+        if args.truth else _own_truth(fp)
+    try:
+        options = RunReplayOptions(args.place_topic, args.pose_topic,
+                                   args.speed, args.wait)
+    except ValueError as exc:
+        p.error(f'--speed: {exc}')
+    rclpy.init(args=ros_args)
+    node = rclpy.create_node('run_replayer')
+    try:
+        results = replay_run(node, fp, odometry, options, lambda s: print(
+            s, file=sys.stderr, flush=True))
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 130
+    except RuntimeError as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return 1
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    scores, table = scored(fp, odometry, truth, results)
+    answered = sum(status is not None for status, _ in results.values())
+    print(f'{fp.source}: {answered}/{len(fp)} scans answered, '
+          f'{sum(pose is not None for _, pose in results.values())} with a '
+          f'pose; odometry {args.odometry}')
+    print(f'{"":26s}' + ''.join(f'{who:>10s}' for who, _ in WHO))
+    for key, name in ROWS:
+        cells = [scores[who].get(key) for who, _ in WHO]
+        print(f'{name:26s}' + ''.join(
+            f'{"-":>10s}' if v is None else f'{v:10.2f}' for v in cells))
+    if args.json:
+        with atomic_write(args.json, 'w') as f:
+            json.dump(scores, f, indent=1)
+    if args.trajectory:
+        with atomic_write(args.trajectory, 'w') as f:
+            f.write('TIMESTAMP,TRUE_X,TRUE_Y,TRUE_YAW,SCAN_X,SCAN_Y,ODOM_X,'
+                    'ODOM_Y,ODOM_YAW,FUSED_X,FUSED_Y,FUSED_YAW\n')
+            np.savetxt(f, table, delimiter=',', fmt='%.6f')
+    return 0 if answered == len(fp) else 1
+
+
+def _own_truth(fp):
+    if fp.position is None or 'YAW' not in fp.meta:
+        raise ValueError(f'{fp.source}: no X, Y, YAW columns to score '
+                         f'against: give --truth')
+    return fp.position, fp.meta['YAW'].astype(float)
+
+
+def scored(fp, odometry, truth, results):
+    """Return ({who: scores}, trajectory table) of a replayed run."""
+    stamps = fp.meta['TIMESTAMP']
+    true_xy, true_yaw = truth
+    single, xy, yaw, cov = arrays(results, len(fp))
+    first = int(np.flatnonzero(np.isfinite(true_xy).all(axis=1))[0])
+    odo_xy, odo_yaw = dead_reckoning(odometry, stamps, true_xy[first],
+                                     true_yaw[first], stamps[first])
+    scores = {'single': score(stamps, true_xy, single),
+              'odometry': score(stamps, true_xy, odo_xy, true_yaw, odo_yaw),
+              'fused': score(stamps, true_xy, xy, true_yaw, yaw, cov)}
+    table = np.column_stack([stamps, true_xy, true_yaw, single, odo_xy,
+                             odo_yaw, xy, yaw])
+    return scores, table
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,257 @@
+"""
+Odometry + WiFi on stamped streams: the filter's timeline (ROS-free).
+
+:class:`Fusion` takes odometry poses (``odom`` frame) and scan answers
+(``map`` frame position, with the recognised place) as they
+arrive, and applies them to a :class:`.particles.ParticleFilter` in stamp
+order: a scan waits until odometry covering its stamp has arrived, and is
+applied at the odometry pose interpolated to its stamp. Between scans the
+particles move in steps of ``step_m`` / ``step_rad``; the pose in between
+is the filter's estimate carried forward by the odometry since.
+
+Odometry is input like any other (:meth:`Fusion.odometry` returns why a
+message was refused): a non-finite pose, a stamp before the previous one,
+or a jump faster than ``max_speed`` / ``max_turn_rate`` (a reset to zero,
+a teleport) is counted and skipped; the filter re-anchors on the next
+good pose. A stamp equal to the previous one is skipped and counted as no
+fault (the next pose carries its motion). When odometry stops (none for ``odom_timeout`` seconds of
+the scans' clock), scans are applied alone: the particles spread by
+``idle_speed`` per second (WiFi alone) until odometry returns.
+A confident scan of another building/floor restarts the filter there.
+"""
+
+from collections import Counter, deque
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from .particles import ParticleFilter, wrap
+
+#: Why odometry or a scan was not applied (counted in ``Fusion.counts``).
+ODOMETRY_FAULTS = ('odometry_invalid', 'odometry_out_of_order',
+                   'odometry_jump')
+
+
+@dataclass(frozen=True)
+class FusionLimits:
+    """What the timeline accepts, and how it steps (seconds, m, rad)."""
+
+    odom_timeout: float = 1.0     # s: odometry older than this is stale
+    max_speed: float = 3.0        # m/s: faster is a jump
+    max_turn_rate: float = 6.0    # rad/s: faster is a jump
+    step_m: float = 0.5           # move the particles every this far
+    step_rad: float = 0.3         # ... or this much turned
+    history: int = 2000           # odometry poses kept at most
+
+    def __post_init__(self):
+        """Refuse non-positive or non-finite limits, naming the field."""
+        for name, value in vars(self).items():
+            if not (isinstance(value, (int, float)) and math.isfinite(value)
+                    and value > 0):
+                raise ValueError(f'{name} = {value!r}: expected a finite '
+                                 f'number > 0')
+
+
+@dataclass
+class FusedPose:
+    """The fused pose at one stamp, in the map frame."""
+
+    stamp: float
+    xy: np.ndarray       # (2,) m
+    yaw: float           # rad
+    cov: np.ndarray      # (3, 3): x, y, yaw
+    with_odometry: bool  # False: the scan was applied alone (odometry stale)
+    restarted: bool      # the filter started afresh at this scan
+
+
+def relative(a, b):
+    """Return (forward, lateral, turn) from pose ``a`` to ``b`` (x, y, yaw)."""
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return c * dx + s * dy, -s * dx + c * dy, float(wrap(b[2] - a[2]))
+
+
+def compose(xy, yaw, step):
+    """Return (xy, yaw) after ``step`` (forward, lateral, turn)."""
+    forward, lateral, turn = step
+    c, s = math.cos(yaw), math.sin(yaw)
+    return (np.array([xy[0] + c * forward - s * lateral,
+                      xy[1] + s * forward + c * lateral]),
+            float(wrap(yaw + turn)))
+
+
+class Fusion:
+    """
+    The filter fed by stamped odometry and scans, in stamp order.
+
+    :meth:`odometry` and :meth:`scan` return the fused poses of the scans
+    they let through (a scan may wait for odometry); :meth:`expire` lets
+    scans through alone once odometry is late; :meth:`pose` is the pose at
+    the newest odometry, between scans.
+    """
+
+    def __init__(self, params=None, limits=None, seed=0):
+        self.filter = ParticleFilter(params, seed)
+        self.limits = limits or FusionLimits()
+        self.counts = Counter()
+        self.reset()
+
+    def reset(self):
+        """Forget everything but the counts: the next scan starts afresh."""
+        self.odom = deque(maxlen=self.limits.history)  # (t, x, y, yaw)
+        self.pending = []       # (stamp, xy, place, arrival), stamp order
+        self.anchor = None      # the odometry pose the particles are at
+        self.place = None
+        self.last_scan = None   # stamp of the last scan applied
+        self.filter.state = None
+
+    @property
+    def odometry_stamp(self):
+        """Return the newest odometry stamp, or None."""
+        return self.odom[-1][0] if self.odom else None
+
+    def odometry(self, stamp, x, y, yaw):
+        """
+        Take one odometry pose; return (fault or None, fused poses).
+
+        The fault is one of :data:`ODOMETRY_FAULTS` (the pose is skipped).
+        """
+        pose = (float(stamp), float(x), float(y), float(yaw))
+        if not all(map(math.isfinite, pose)):
+            return self._fault('odometry_invalid'), []
+        if self.odom:
+            last = self.odom[-1]
+            dt = pose[0] - last[0]
+            if dt == 0:     # the next pose carries its motion
+                self.counts['odometry_same_stamp'] += 1
+                return None, []
+            if dt <= 0:
+                return self._fault('odometry_out_of_order'), []
+            step = relative(last[1:], pose[1:])
+            if math.hypot(step[0], step[1]) > self.limits.max_speed * dt or \
+                    abs(step[2]) > self.limits.max_turn_rate * dt:
+                self._reanchor(pose)
+                return self._fault('odometry_jump'), []
+        self.odom.append(pose)
+        self.counts['odometry'] += 1
+        return None, self._advance()
+
+    def _fault(self, reason):
+        self.counts[reason] += 1
+        return reason
+
+    def _reanchor(self, pose):
+        """After a jump: continue from ``pose`` as if no motion happened."""
+        self.odom.clear()
+        self.odom.append(pose)
+        if self.anchor is not None:
+            self.anchor = pose
+
+    def scan(self, stamp, xy, place, confident=True, arrival=None):
+        """
+        Take one scan's answer; return the fused poses now available.
+
+        ``place``: its (building, floor); a confident scan of another place
+        restarts the filter there, an unconfident one is not applied.
+        ``arrival``: when it arrived, on the clock :meth:`expire` is given
+        (default: its stamp).
+        """
+        if place != self.place and not confident:
+            self.counts['scans_other_place'] += 1
+            return []
+        self.pending.append((float(stamp), np.asarray(xy, np.float64), place,
+                             float(stamp if arrival is None else arrival)))
+        self.pending.sort(key=lambda item: item[0])
+        return self._advance()
+
+    def expire(self, now):
+        """
+        Apply alone the scans that waited for odometry beyond the timeout.
+
+        ``now``: the current time on the clock of the scans' ``arrival``.
+        """
+        out = []
+        while self.pending and \
+                now - self.pending[0][3] > self.limits.odom_timeout and \
+                not self._covered(self.pending[0][0]):
+            out.append(self._apply(*self.pending.pop(0)[:3], odometry=False))
+        return out + self._advance()
+
+    def _covered(self, stamp):
+        return bool(self.odom) and self.odom[-1][0] >= stamp
+
+    def _advance(self):
+        """Apply the pending scans that odometry covers, in stamp order."""
+        out = []
+        while self.pending and self._covered(self.pending[0][0]):
+            out.append(self._apply(*self.pending.pop(0)[:3], odometry=True))
+        if not self.pending and self.anchor is not None and self.odom:
+            step = relative(self.anchor[1:], self.odom[-1][1:])
+            if math.hypot(step[0], step[1]) >= self.limits.step_m or \
+                    abs(step[2]) >= self.limits.step_rad:
+                self._move_to(self.odom[-1])
+        return out
+
+    def _odometry_at(self, stamp):
+        """Return the odometry pose interpolated to ``stamp``."""
+        odom = self.odom
+        if stamp >= odom[-1][0]:
+            return odom[-1]
+        i = len(odom) - 1
+        while i > 0 and odom[i - 1][0] > stamp:
+            i -= 1
+        if i == 0:
+            return odom[0]
+        (t0, x0, y0, a0), (t1, x1, y1, a1) = odom[i - 1], odom[i]
+        f = (stamp - t0) / (t1 - t0)
+        return (stamp, x0 + f * (x1 - x0), y0 + f * (y1 - y0),
+                float(wrap(a0 + f * wrap(a1 - a0))))
+
+    def _move_to(self, pose):
+        self.filter.move(*relative(self.anchor[1:], pose[1:]))
+        self.anchor = pose
+        while len(self.odom) > 2 and self.odom[1][0] <= pose[0]:
+            self.odom.popleft()
+
+    def _apply(self, stamp, xy, place, odometry):
+        restart = not self.filter.started or place != self.place
+        if odometry:
+            pose = self._odometry_at(max(stamp, self.anchor[0])
+                                     if self.anchor and not restart
+                                     else stamp)
+            if restart or self.anchor is None:
+                self.anchor = pose
+            else:
+                self._move_to(pose)
+        else:
+            self.counts['scans_without_odometry'] += 1
+            self.anchor = None
+            if not restart and self.last_scan is not None:
+                self.filter.spread(max(stamp - self.last_scan, 0.0))
+        if restart:
+            self.filter.start(xy)
+            self.place = place
+        if self.filter.update(xy):
+            restart = True
+        self.counts['restarts'] += restart
+        self.last_scan = stamp
+        self.counts['scans_fused' if odometry else 'scans_alone'] += 1
+        estimate = self.filter.estimate()
+        return FusedPose(stamp, estimate.xy, estimate.yaw, estimate.cov,
+                         odometry, restart)
+
+    def pose(self):
+        """
+        Return the pose at the newest odometry, between scans, or None.
+
+        The filter's estimate carried forward by the odometry since its
+        last step (the covariance as at that step).
+        """
+        if not self.filter.started or self.anchor is None or not self.odom:
+            return None
+        estimate = self.filter.estimate()
+        xy, yaw = compose(estimate.xy, estimate.yaw,
+                          relative(self.anchor[1:], self.odom[-1][1:]))
+        return FusedPose(self.odom[-1][0], xy, yaw, estimate.cov, True,
+                         False)

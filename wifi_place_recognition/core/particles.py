@@ -1,0 +1,255 @@
+"""
+A particle filter over x, y, yaw fed by odometry and WiFi positions.
+
+ROS-free, numpy only; :mod:`.fusion` runs it on stamped streams. The pieces
+are those of nav2_amcl, with a WiFi scan's k-NN position in place of a
+laser scan:
+
+- :class:`MotionModel`: an odometry step (forward, lateral, turn in the
+  robot frame) applied to every particle with noise proportional to it.
+  Each particle also carries a heading drift (rad per metre driven): wheel
+  odometry's heading often loses a steady angle per metre (a calibration
+  bias), and the particles that carry the right drift survive;
+- :class:`WifiSensorModel`: a scan's position as a Gaussian likelihood,
+  with a floor for outliers;
+- :class:`ParticleFilter`: start from a scan (unknown heading), move,
+  weigh, resample when the effective sample size falls, and start afresh
+  when the scans keep disagreeing with the particles (a kidnapped robot).
+"""
+
+from dataclasses import asdict, dataclass, fields
+import math
+
+import numpy as np
+
+TWO_PI = 2 * math.pi
+
+
+def wrap(angle):
+    """Return ``angle`` (rad) wrapped to [-pi, pi)."""
+    return (np.asarray(angle) + math.pi) % TWO_PI - math.pi
+
+
+@dataclass(frozen=True)
+class FusionParams:
+    """
+    The parameters of the odometry + WiFi filter (stored in a model file).
+
+    Noise figures are one standard deviation.
+    """
+
+    particles: int = 3000
+    distance_noise: float = 0.02      # fraction of the distance driven
+    turn_noise: float = 0.05          # fraction of the turn
+    heading_noise: float = 0.005      # rad per sqrt(m) driven
+    drift_mean: float = 0.0           # rad per m: the heading drift expected
+    drift_sd: float = 0.04            # rad per m: spread of the drift prior
+    drift_walk: float = 0.002         # rad per m, per sqrt(m) driven
+    wifi_sd: float = 4.0              # m: a scan position's likelihood width
+    wifi_outlier: float = 0.5         # likelihood floor (share of the peak)
+    start_sd: float = 3.0             # m: spread of a start around a scan
+    reset_sigmas: float = 3.0         # a scan this many sd off disagrees
+    reset_after: int = 10             # so many in a row: start afresh
+    idle_speed: float = 0.5           # m/s: spread per second without odometry
+    fit: dict = None                  # how they were chosen (free-form)
+
+    def __post_init__(self):
+        """Refuse values that would make the filter meaningless."""
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == 'fit':
+                if value is not None and not isinstance(value, dict):
+                    raise ValueError(f'fusion fit must be an object, got '
+                                     f'{type(value).__name__}')
+                continue
+            positive = f.name in ('particles', 'wifi_sd', 'start_sd',
+                                  'reset_sigmas', 'reset_after')
+            if isinstance(value, bool) or \
+                    not isinstance(value, (int, float)) or \
+                    not math.isfinite(value) or \
+                    (value < 0 and f.name != 'drift_mean') or \
+                    (positive and value == 0):
+                raise ValueError(f'fusion parameter {f.name} = {value!r}: '
+                                 f'expected a finite number '
+                                 f'{"> 0" if positive else ">= 0"}')
+        for name, top in (('particles', 10 ** 6), ('reset_after', 10 ** 6)):
+            value = getattr(self, name)
+            if value != int(value) or value > top:
+                raise ValueError(f'fusion parameter {name} = {value!r}: '
+                                 f'expected a whole number up to {top}')
+        if self.wifi_outlier >= 1:
+            raise ValueError(f'fusion parameter wifi_outlier = '
+                             f'{self.wifi_outlier!r}: expected < 1')
+
+    def to_dict(self):
+        """Return a JSON-ready dict (``fit`` left out when empty)."""
+        out = asdict(self)
+        if out['fit'] is None:
+            del out['fit']
+        return out
+
+    @classmethod
+    def from_dict(cls, data):
+        """Build from :meth:`to_dict` output; raise ValueError naming a key."""
+        if not isinstance(data, dict):
+            raise ValueError(f'fusion must be an object, got '
+                             f'{type(data).__name__}')
+        unknown = sorted(set(data) - {f.name for f in fields(cls)})
+        if unknown:
+            raise ValueError(f'unknown fusion parameter(s) '
+                             f'{", ".join(unknown)}')
+        return cls(**data)
+
+
+@dataclass
+class Estimate:
+    """The filter's pose: mean and covariance over x, y, yaw."""
+
+    xy: np.ndarray     # (2,) m
+    yaw: float         # rad
+    cov: np.ndarray    # (3, 3): x, y, yaw
+
+
+class MotionModel:
+    """Move particles by an odometry step, with noise proportional to it."""
+
+    def __init__(self, params):
+        self.params = params
+
+    def move(self, state, forward, lateral, turn, rng):
+        """
+        Apply one odometry step to ``state`` (n, 4: x, y, yaw, drift).
+
+        ``forward``, ``lateral`` (m) and ``turn`` (rad) are the step in the
+        robot frame at its start.
+        """
+        p = self.params
+        n = len(state)
+        distance = math.hypot(forward, lateral)
+        scale = 1 + p.distance_noise * rng.standard_normal(n)
+        turned = turn * (1 + p.turn_noise * rng.standard_normal(n)) + \
+            state[:, 3] * distance + \
+            p.heading_noise * math.sqrt(distance) * rng.standard_normal(n)
+        heading = state[:, 2] + turned / 2
+        cos, sin = np.cos(heading), np.sin(heading)
+        state[:, 0] += scale * (forward * cos - lateral * sin)
+        state[:, 1] += scale * (forward * sin + lateral * cos)
+        state[:, 2] = wrap(state[:, 2] + turned)
+        state[:, 3] += p.drift_walk * math.sqrt(distance) * \
+            rng.standard_normal(n)
+
+    def spread(self, state, seconds, rng):
+        """Spread ``state`` for ``seconds`` without odometry (WiFi alone)."""
+        sd = self.params.idle_speed * seconds
+        state[:, :2] += sd * rng.standard_normal((len(state), 2))
+
+
+class WifiSensorModel:
+    """
+    The likelihood of a particle's position given one scan's position.
+
+    A Gaussian of ``wifi_sd`` metres around the scan's k-NN position, over
+    a floor of ``wifi_outlier`` (a scan placed far off does not wipe out
+    the particles). The width is one figure, not the scan's own sigma: the
+    k-NN's errors along a run are correlated, and its sigma is calibrated
+    on folds whose errors differ from a new run's.
+    """
+
+    def __init__(self, params):
+        self.params = params
+
+    def likelihood(self, state, xy):
+        """Return how likely each particle is, given a scan at ``xy`` (peak 1)."""
+        p = self.params
+        d2 = ((state[:, :2] - xy) ** 2).sum(axis=1)
+        return (1 - p.wifi_outlier) * \
+            np.exp(-d2 / (2 * p.wifi_sd * p.wifi_sd)) + p.wifi_outlier
+
+
+class ParticleFilter:
+    """
+    Particles over x, y, yaw (and the odometry's heading drift).
+
+    :meth:`start` from a scan; then :meth:`move` per odometry step and
+    :meth:`update` per scan; :meth:`estimate` for the pose.
+    """
+
+    def __init__(self, params=None, seed=0):
+        self.params = params or FusionParams()
+        self.motion = MotionModel(self.params)
+        self.sensor = WifiSensorModel(self.params)
+        self.rng = np.random.default_rng(seed)
+        self.state = None
+        self.weight = None
+        self.disagreeing = 0
+
+    @property
+    def started(self):
+        """Return True once a scan started the filter."""
+        return self.state is not None
+
+    def start(self, xy):
+        """Spread particles around a scan's position, every heading."""
+        p = self.params
+        n = int(p.particles)
+        self.state = np.empty((n, 4))
+        self.state[:, :2] = xy + p.start_sd * self.rng.standard_normal((n, 2))
+        self.state[:, 2] = self.rng.uniform(-math.pi, math.pi, n)
+        self.state[:, 3] = p.drift_mean + \
+            p.drift_sd * self.rng.standard_normal(n)
+        self.weight = np.full(n, 1.0 / n)
+        self.disagreeing = 0
+
+    def move(self, forward, lateral, turn):
+        """Apply one odometry step (robot frame at its start)."""
+        self.motion.move(self.state, forward, lateral, turn, self.rng)
+
+    def spread(self, seconds):
+        """Let ``seconds`` pass without odometry."""
+        self.motion.spread(self.state, seconds, self.rng)
+
+    def update(self, xy):
+        """
+        Weigh the particles by a scan at ``xy`` (m); return True on a restart.
+
+        After ``reset_after`` scans in a row farther than ``reset_sigmas``
+        standard deviations (the particles' spread and ``wifi_sd``
+        together) from the estimate, the filter starts afresh at the scan:
+        the robot was carried away (kidnapped), or the filter went wrong.
+        """
+        p = self.params
+        estimate = self.estimate()
+        cov = estimate.cov[:2, :2] + np.eye(2) * p.wifi_sd ** 2
+        delta = np.asarray(xy) - estimate.xy
+        if delta @ np.linalg.solve(cov, delta) > p.reset_sigmas ** 2:
+            self.disagreeing += 1
+        else:
+            self.disagreeing = 0
+        if self.disagreeing >= p.reset_after:
+            self.start(xy)
+            return True
+        self.weight = self.weight * self.sensor.likelihood(self.state, xy)
+        self.weight /= self.weight.sum()
+        if 1.0 / (self.weight ** 2).sum() < len(self.weight) / 2:
+            self._resample()
+        return False
+
+    def _resample(self):
+        """Low-variance resampling."""
+        n = len(self.weight)
+        positions = (self.rng.random() + np.arange(n)) / n
+        cumulative = np.cumsum(self.weight)
+        cumulative[-1] = 1.0
+        self.state = self.state[np.searchsorted(cumulative, positions)]
+        self.weight = np.full(n, 1.0 / n)
+
+    def estimate(self):
+        """Return the weighted mean pose and its covariance."""
+        w = self.weight
+        xy = w @ self.state[:, :2]
+        c, s = w @ np.cos(self.state[:, 2]), w @ np.sin(self.state[:, 2])
+        yaw = math.atan2(s, c)
+        delta = np.column_stack([self.state[:, :2] - xy,
+                                 wrap(self.state[:, 2] - yaw)])
+        cov = (delta * w[:, None]).T @ delta
+        return Estimate(xy, yaw, cov)

@@ -1,0 +1,138 @@
+"""
+Score poses over a run against its truth (ROS-free): fused, scans, odometry.
+
+A robot run is three stamped streams: scans (with the single-scan answer),
+odometry poses, and the truth (e.g. AMCL's pose at each scan).
+:func:`fuse_offline` runs :class:`.fusion.Fusion` over them in stamp order
+(what the node does live); :func:`dead_reckoning` places odometry alone in
+the map frame from the first true pose; :func:`score` gives the figures
+the README's robot table reports; :func:`truth_at` reads a truth file's
+poses at the scans' stamps.
+"""
+
+import math
+
+import numpy as np
+
+from .fusion import Fusion, relative
+from .particles import wrap
+
+#: Chi-square (2 dof) of the 95 % ellipse.
+CHI2_95 = -2 * math.log(0.05)
+
+
+def fuse_offline(odometry, scans, fusion=None):
+    """
+    Return the fused pose at every scan: (xy (n, 2), yaw (n,), cov (n, 3, 3)).
+
+    ``odometry``: (m, 4) rows of stamp, x, y, yaw; ``scans``: stamps (n,)
+    and xy (n, 2), both in stamp order, as the node would receive
+    them (a scan is taken after odometry of the same stamp). Scans with no
+    odometry at all are applied alone. NaN where a scan gave no pose.
+    """
+    fusion = fusion or Fusion()
+    stamps, xy = scans
+    n = len(stamps)
+    out_xy, out_yaw = np.full((n, 2), np.nan), np.full(n, np.nan)
+    out_cov = np.full((n, 3, 3), np.nan)
+    index = {float(s): i for i, s in enumerate(stamps)}
+
+    def keep(poses):
+        for p in poses:
+            i = index[p.stamp]
+            out_xy[i], out_yaw[i], out_cov[i] = p.xy, p.yaw, p.cov
+    o = 0
+    for i in range(n):
+        while o < len(odometry) and odometry[o, 0] <= stamps[i]:
+            keep(fusion.odometry(*odometry[o])[1])
+            keep(fusion.expire(odometry[o, 0]))
+            o += 1
+        if np.isfinite(xy[i]).all():
+            keep(fusion.scan(stamps[i], xy[i], (0, 0)))
+    for row in odometry[o:]:
+        keep(fusion.odometry(*row)[1])
+    keep(fusion.expire(math.inf))
+    return out_xy, out_yaw, out_cov
+
+
+def dead_reckoning(odometry, stamps, start_xy, start_yaw, start_stamp):
+    """
+    Return odometry alone at ``stamps`` in the map frame: (xy, yaw).
+
+    The odometry pose at ``start_stamp`` is put on the true
+    ``start_xy``/``start_yaw`` (a rigid transform), as an oracle start.
+    """
+    t = odometry[:, 0]
+
+    def at(s):
+        x = np.interp(s, t, odometry[:, 1])
+        y = np.interp(s, t, odometry[:, 2])
+        yaw = np.interp(s, t, np.unwrap(odometry[:, 3]))
+        return x, y, yaw
+    origin = at(start_stamp)
+    xy, yaw = np.empty((len(stamps), 2)), np.empty(len(stamps))
+    for i, s in enumerate(stamps):
+        step = relative(origin, at(s))
+        c, sn = math.cos(start_yaw), math.sin(start_yaw)
+        xy[i] = (start_xy[0] + c * step[0] - sn * step[1],
+                 start_xy[1] + sn * step[0] + c * step[1])
+        yaw[i] = wrap(start_yaw + step[2])
+    return xy, yaw
+
+
+def truth_at(poses, stamps):
+    """
+    Return true (xy (n, 2), yaw (n,)) at ``stamps`` from (m, 4) ``poses``.
+
+    Linear between the poses around each stamp (yaw along the shorter
+    arc); NaN outside their time span.
+    """
+    t = poses[:, 0]
+    inside = (stamps >= t[0]) & (stamps <= t[-1])
+    xy = np.column_stack([np.interp(stamps, t, poses[:, 1]),
+                          np.interp(stamps, t, poses[:, 2])])
+    yaw = wrap(np.interp(stamps, t, np.unwrap(poses[:, 3])))
+    xy[~inside], yaw = np.nan, np.where(inside, yaw, np.nan)
+    return xy, yaw
+
+
+def score(stamps, truth_xy, xy, truth_yaw=None, yaw=None, cov=None,
+          settle_s=30.0):
+    """
+    Return error figures (m, degrees, shares) of poses against the truth.
+
+    Mean, median, p95 and max error; the time after the first stamp from
+    which the error stays below 2 m; the largest error after ``settle_s``;
+    the median yaw error after ``settle_s``; the share of scans whose true
+    position lies in the 95 % ellipse of ``cov``. Rows with NaN are left
+    out.
+    """
+    ok = np.isfinite(xy).all(axis=1) & np.isfinite(truth_xy).all(axis=1)
+    if not ok.any():
+        return {'scans': 0}
+    error = np.linalg.norm(xy - truth_xy, axis=1)
+    since = stamps - stamps[0]
+    late = ok & (since >= settle_s)
+    above = np.flatnonzero(ok & (error >= 2.0))
+    out = {'scans': int(ok.sum()),
+           'mean_m': float(error[ok].mean()),
+           'median_m': float(np.median(error[ok])),
+           'p95_m': float(np.quantile(error[ok], 0.95)),
+           'max_m': float(error[ok].max()),
+           'below_2m_from_s': float(since[above[-1] + 1]) if len(above) and
+           above[-1] + 1 < len(since) else
+           (0.0 if not len(above) else math.inf),
+           'max_after_settle_m': float(error[late].max()) if late.any()
+           else math.nan}
+    if yaw is not None and truth_yaw is not None:
+        good = late & np.isfinite(yaw) & np.isfinite(truth_yaw)
+        out['yaw_median_deg_after_settle'] = float(np.degrees(np.median(
+            np.abs(wrap(yaw[good] - truth_yaw[good]))))) if good.any() \
+            else math.nan
+    if cov is not None:
+        good = ok & np.isfinite(cov[:, :2, :2]).all(axis=(1, 2))
+        delta = (truth_xy - xy)[good]
+        inside = [d @ np.linalg.solve(c + 1e-12 * np.eye(2), d) <= CHI2_95
+                  for d, c in zip(delta, cov[good, :2, :2])]
+        out['in_95_ellipse'] = float(np.mean(inside)) if inside else math.nan
+    return out

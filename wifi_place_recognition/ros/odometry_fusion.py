@@ -1,0 +1,143 @@
+"""
+classifier_node's odometry input: :class:`.core.fusion.Fusion` on ROS.
+
+Subscribes ``odom`` (``nav_msgs/Odometry``, the pose in the robot's odom
+frame; sensor-data QoS with a deep queue) and feeds it, with each answered
+scan's position, to the filter in stamp order (a zero stamp means the
+time the node takes the message). Fused poses go to ``publish(fused)``:
+one per scan, stamped with the scan's stamp, and ``pose_rate`` times a
+second between scans while odometry moves on. A timer lets a scan that
+waited ``odom_timeout`` seconds for odometry through alone. Odometry faults
+(:data:`.core.fusion.ODOMETRY_FAULTS`) are counted and logged (throttled);
+the health status is WARN while odometry is faulty or stale.
+"""
+
+import copy
+import time
+
+from nav_msgs.msg import Odometry
+from rclpy.qos import qos_profile_sensor_data
+
+from ..core.fusion import Fusion, FusionLimits, ODOMETRY_FAULTS
+from .messages import stamp_time, yaw_of
+
+ODOM_QOS = copy.copy(qos_profile_sensor_data)
+ODOM_QOS.depth = 100
+THROTTLE_S = 5.0
+#: Seconds after a fault or a scan fused alone during which health is WARN.
+WARN_S = 10.0
+#: Scans kept waiting for odometry at most (more: the oldest forgotten).
+MAX_WAITING = 100
+
+
+class OdometryFusion:
+    """Odometry in, fused poses out, for ``node``."""
+
+    def __init__(self, node, params, odom_timeout, pose_rate, publish):
+        self._node = node
+        self._publish = publish
+        self.fusion = Fusion(params, FusionLimits(odom_timeout=odom_timeout))
+        self._last_problem = (None, -float('inf'))   # (what, monotonic s)
+        self._published_stamp = None
+        self._stamps = {}   # float stamp -> the message's, to publish it
+        self._odometry_stamp = (None, None)
+        self._timer = None
+        self.enabled = True
+        self._subscription = node.create_subscription(
+            Odometry, 'odom', self._on_odometry, ODOM_QOS)
+        self.configure(odom_timeout, pose_rate)
+
+    def configure(self, odom_timeout=None, pose_rate=None):
+        """Change the timeout (s) or the between-scan rate (Hz; 0: none)."""
+        if odom_timeout is not None:
+            self.fusion.limits = FusionLimits(
+                **{**vars(self.fusion.limits), 'odom_timeout': odom_timeout})
+        if pose_rate is not None:
+            if self._timer is not None:
+                self._node.destroy_timer(self._timer)
+            self.pose_rate = pose_rate
+            self._timer = self._node.create_timer(
+                1.0 / pose_rate if pose_rate else 0.1, self._on_timer)
+
+    @property
+    def active(self):
+        """Return True when enabled and odometry has arrived."""
+        return self.enabled and self.fusion.odometry_stamp is not None
+
+    def enable(self, enabled):
+        """Fuse (True) or ignore odometry and forget the filter (False)."""
+        if not enabled:
+            self.reset()
+        self.enabled = enabled
+
+    def reset(self):
+        """Forget the filter and odometry: the next scan starts afresh."""
+        self.fusion.reset()
+        self._stamps.clear()
+
+    def scan(self, stamp, xy, place, confident):
+        """Feed the answer to one scan; publish the poses it releases."""
+        seconds = stamp_time(stamp, self._node.get_clock())
+        self._stamps[seconds] = stamp
+        self._emit(self.fusion.scan(seconds, xy, place, confident,
+                                    time.monotonic()))
+        if len(self._stamps) > MAX_WAITING:     # never released: forget
+            for key in sorted(self._stamps)[:-MAX_WAITING]:
+                del self._stamps[key]
+
+    def _on_odometry(self, msg):
+        if not self.enabled:
+            return
+        pose = msg.pose.pose
+        seconds = stamp_time(msg.header.stamp, self._node.get_clock())
+        fault, fused = self.fusion.odometry(
+            seconds, pose.position.x, pose.position.y,
+            yaw_of(pose.orientation))
+        if not fault:
+            self._odometry_stamp = (seconds, msg.header.stamp)
+        if fault:
+            self._problem(f'{fault.replace("_", " ")}: odometry message '
+                          f'skipped (stamp {msg.header.stamp.sec}.'
+                          f'{msg.header.stamp.nanosec:09d}, x '
+                          f'{pose.position.x:g}, y {pose.position.y:g})')
+        self._emit(fused)
+
+    def _on_timer(self):
+        if not self.enabled:
+            return
+        fused = self.fusion.expire(time.monotonic())
+        if fused:
+            timeout = self.fusion.limits.odom_timeout
+            self._problem(f'no odometry for {timeout:g} s: {len(fused)} '
+                          f'scan(s) fused alone (WiFi only)')
+        self._emit(fused)
+        if self.pose_rate:
+            pose = self.fusion.pose()
+            if pose is not None and pose.stamp != self._published_stamp:
+                self._emit([pose])
+
+    def _emit(self, poses):
+        for pose in poses:
+            stamp = self._stamps.pop(pose.stamp, None)
+            if stamp is None:     # between scans: the newest odometry's
+                seconds, stamp = self._odometry_stamp
+                if seconds != pose.stamp:
+                    continue
+            self._published_stamp = pose.stamp
+            self._publish(pose, stamp, self.fusion.place)
+
+    def _problem(self, what):
+        self._last_problem = (what, time.monotonic())
+        self._node.get_logger().warn(what, throttle_duration_sec=THROTTLE_S)
+
+    def health(self):
+        """Return (problem or None, {count name: value}) for diagnostics."""
+        counts = self.fusion.counts
+        values = {f'odometry_{k}' if not k.startswith('odometry') else k:
+                  counts.get(k, 0) for k in
+                  ('odometry', 'odometry_same_stamp') + ODOMETRY_FAULTS + (
+                      'scans_fused', 'scans_alone', 'scans_other_place',
+                      'restarts')}
+        what, when = self._last_problem
+        recent = time.monotonic() - when < WARN_S
+        return (what if recent else None), values

@@ -1,0 +1,143 @@
+"""
+Replay a robot run (scans + odometry) through classifier_node, in stamp order.
+
+A stand-in for a robot: each scan row becomes a ``sensor_msgs/JointState``
+on ``wifi/scan`` and each odometry row a ``nav_msgs/Odometry`` on ``odom``
+(frame ``odom``, child ``base_link``), all stamped with their recorded
+times and sent in stamp order at ``speed`` times the recorded pace (an
+odometry pose before a scan of the same stamp). The node's answers on
+``~/place`` (with each scan's own position) and its poses on ``~/pose``
+are matched to the scans by ``header.stamp``.
+"""
+
+from dataclasses import dataclass
+import math
+import time
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
+import numpy as np
+import rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from .messages import scan_message, status_values, yaw_of
+from .replayer import Replayer, unique_stamps
+
+
+@dataclass(frozen=True)
+class RunReplayOptions:
+    """How :func:`replay_run` sends a run (``replay_run``'s options)."""
+
+    place_topic: str = '/classifier_node/place'
+    pose_topic: str = '/classifier_node/pose'
+    speed: float = 10.0      # times the recorded pace
+    wait: float = 15.0       # s for the node to appear
+    settle: float = 2.0      # s to wait for the last answers
+
+    def __post_init__(self):
+        """Refuse a speed that is not a positive finite number."""
+        if not (math.isfinite(self.speed) and self.speed > 0):
+            raise ValueError(f'speed must be > 0, not {self.speed!r}')
+
+
+def odometry_message(row):
+    """Return a nav_msgs/Odometry of a (stamp, x, y, yaw) row."""
+    msg = Odometry()
+    sec = math.floor(row[0])
+    msg.header.stamp = Time(sec=int(sec),
+                            nanosec=min(int(round((row[0] - sec) * 1e9)),
+                                        999_999_999))
+    msg.header.frame_id = 'odom'
+    msg.child_frame_id = 'base_link'
+    msg.pose.pose.position.x = float(row[1])
+    msg.pose.pose.position.y = float(row[2])
+    msg.pose.pose.orientation.z = math.sin(row[3] / 2)
+    msg.pose.pose.orientation.w = math.cos(row[3] / 2)
+    return msg
+
+
+class RunReplayer(Replayer):
+    """A :class:`.replayer.Replayer` that also sends odometry, gets poses."""
+
+    def __init__(self, node, options):
+        super().__init__(node, options.place_topic)
+        reliable = QoSProfile(depth=1000,
+                              reliability=ReliabilityPolicy.RELIABLE)
+        self.odom_pub = node.create_publisher(Odometry, 'odom', reliable)
+        self.poses = {}      # (sec, nanosec) -> PoseWithCovarianceStamped
+        node.create_subscription(PoseWithCovarianceStamped,
+                                 options.pose_topic, self._on_pose, reliable)
+
+    def _on_pose(self, msg):
+        self.poses[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = msg
+
+    def wait_for_node(self, timeout):
+        """Spin until the node takes scans and odometry and answers."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.odom_pub.get_subscription_count() and \
+                    super().wait_for_node(0.05):
+                return True
+        return False
+
+
+def replay_run(node, fp, odometry, options, log):
+    """
+    Send the scans of ``fp`` and the ``odometry`` rows, in stamp order.
+
+    Return {scan row: (place status or None, pose message or None)}.
+    """
+    replayer = RunReplayer(node, options)
+    if not replayer.wait_for_node(options.wait):
+        raise RuntimeError(f'no classifier node took odom and answered on '
+                           f'{options.place_topic} within {options.wait} s '
+                           f'(is it running, with a model with positions, '
+                           f'on the same ROS_DOMAIN_ID?)')
+    replayer.reset(options.wait)
+    times = fp.meta['TIMESTAMP']
+    order = np.argsort(times, kind='stable')
+    stamps = dict(zip(order, unique_stamps(times[order])))
+    events = sorted([(float(t), 0, k) for k, t in enumerate(odometry[:, 0])] +
+                    [(float(times[r]), 1, r) for r in order])
+    start, t0 = time.monotonic(), events[0][0] if events else 0.0
+    for n, (t, kind, k) in enumerate(events):
+        replayer.spin_until(lambda: False,
+                            start + (t - t0) / options.speed)
+        if kind:
+            replayer.publish(k, scan_message(fp.ap_ids, fp.rssi[k],
+                                             stamps[k]))
+        else:
+            replayer.odom_pub.publish(odometry_message(odometry[k]))
+        if (n + 1) % 2000 == 0:
+            log(f'{n + 1}/{len(events)} messages sent, '
+                f'{len(replayer.answers)} scans answered')
+    replayer.spin_until(
+        lambda: len(replayer.answers) >= len(order),
+        time.monotonic() + options.settle)
+    rclpy.spin_once(node, timeout_sec=0.2)
+    return {row: (replayer.answers.get(row), replayer.poses.get(
+        (stamps[row].sec, stamps[row].nanosec))) for row in order}
+
+
+def arrays(results, n):
+    """
+    Return the scans' own and the node's poses as arrays over ``n`` rows.
+
+    (single xy (n, 2), pose xy (n, 2), pose yaw (n,), pose cov (n, 3, 3)),
+    NaN where a scan got no answer or no pose.
+    """
+    single = np.full((n, 2), np.nan)
+    xy, yaw = np.full((n, 2), np.nan), np.full(n, np.nan)
+    cov = np.full((n, 3, 3), np.nan)
+    for row, (status, pose) in results.items():
+        values = status_values(status) if status is not None else {}
+        if 'scan_x' in values:
+            single[row] = float(values['scan_x']), float(values['scan_y'])
+        if pose is not None:
+            p = pose.pose
+            xy[row] = p.pose.position.x, p.pose.position.y
+            yaw[row] = yaw_of(p.pose.orientation)
+            c = np.asarray(p.covariance).reshape(6, 6)
+            cov[row] = c[np.ix_((0, 1, 5), (0, 1, 5))]
+    return single, xy, yaw, cov
