@@ -43,3 +43,10 @@ def test_pip_install_puts_every_executable_where_ros2_run_looks(tmp_path):
     assert node.returncode == 1, node.stderr
     assert '[classifier_node]: cannot start: ' in node.stderr
     assert 'max_aps out of range' in node.stderr, node.stderr
+    # `ros2 run ... --help` reaches the executable, which answers it.
+    for name in ('classifier_node', 'wifi_scanner_node',
+                 'record_fingerprints'):
+        shown = run([ros2_run / name, '--help'], env=env, cwd=tmp_path,
+                    timeout=30)
+        assert shown.returncode == 0, shown.stderr
+        assert shown.stdout.startswith(f'usage: {name} [-h]'), shown.stdout

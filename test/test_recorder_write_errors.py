@@ -14,8 +14,11 @@ AP1, AP2, AP3 = 'aa:bb:cc:00:00:01', 'aa:bb:cc:00:00:02', 'aa:bb:cc:00:00:03'
 
 
 @pytest.mark.parametrize('where, reason', [
-    ('missing/rec.csv', 'No such file or directory'),
-    ('a_file/rec.csv', 'Not a directory')])
+    ('a_file/rec.csv', 'cannot create the folder {folder} ({tmp}/a_file is '
+     'not a folder)'),
+    ('a_file/sub/rec.csv', 'cannot create the folder {folder} ({tmp}/a_file '
+     'is not a folder)'),
+    ('/sys/rec.csv', 'cannot write in the folder /sys (')])
 def test_an_output_folder_that_cannot_be_written_is_one_error_line(
         tmp_path, where, reason):
     (tmp_path / 'a_file').write_text('')
@@ -23,11 +26,29 @@ def test_an_output_folder_that_cannot_be_written_is_one_error_line(
     result = run(python_module('ros.record_fingerprints', '--ros-args',
                                '-p', f'output:={output}'), timeout=30)
     assert result.returncode == 1, result.stderr
-    ours = [line for line in result.stderr.splitlines() if '[rcl]' not in line]
-    assert len(ours) == 1, result.stderr
-    assert (f'] [record_fingerprints]: cannot start: output {output}: cannot '
-            f'write in the folder {output.parent} ({reason})') in ours[0], \
-        result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    reason = reason.format(folder=output.parent, tmp=tmp_path)
+    assert (f'] [record_fingerprints]: cannot start: output {output}: '
+            f'{reason}') in lines[0], result.stderr
+
+
+def test_missing_output_folders_are_created(ros, tmp_path):
+    output = tmp_path / 'walks' / 'new' / 'walk1.csv'
+    proc = NodeProcess(tmp_path, python_module(
+        'ros.record_fingerprints', '--ros-args', '-p', f'output:={output}',
+        '-p', 'building:=0', '-p', 'floor:=1'), 'recorder_new_folder')
+    recorder = Recorder(ros, 'recorder_new_folder')
+    try:
+        assert wait_until(lambda: recorder.status is not None, 30, ros), \
+            proc.stop()[1]
+        recorder.send(1, [AP1])
+    finally:
+        recorder.close()
+        code, log = proc.stop()
+    assert code == 0, log
+    assert f'recording to {output} ' in log, log
+    assert output.read_text().splitlines()[1].startswith('0,1,1.000,'), log
 
 
 class Recorder:

@@ -30,6 +30,10 @@ EXPECTED = {
     'test_reliability.py::test_sigkill_while_saving_never_tears_the_model_'
     'file': ({'system'}, 'unit'),
     'test_flake8.py::test_flake8': ({'linter'}, 'unit'),
+    'test_help.py::test_an_offline_tool_answers_help_and_starts_nothing['
+    'train_model--h]': ({'system'}, 'unit'),
+    'test_help.py::test_a_running_node_declares_the_tables_parameters_and_'
+    'topics[classifier_node]': ({'ros', 'system'}, 'unit'),
 }
 
 

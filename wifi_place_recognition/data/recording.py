@@ -71,7 +71,20 @@ class FingerprintLog:
         self.written_aps = len(self.ap_ids)     # AP columns in the file
 
     def _check_folder(self):
-        """Raise RecordingError unless a file can be created beside ``path``."""
+        """
+        Create the folder of ``path`` if missing (with its parents).
+
+        Raise RecordingError unless a file can be created in it.
+        """
+        folder = self.path.parent
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            there = next(p for p in (folder, *folder.parents) if p.exists())
+            reason = exc.strerror or exc if there.is_dir() else \
+                f'{there} is not a folder'
+            raise RecordingError(f'output {self.path}: cannot create the '
+                                 f'folder {folder} ({reason})') from None
         try:
             fd, probe = tempfile.mkstemp(dir=self.path.parent,
                                          prefix=f'.{self.path.name}.',

@@ -1,11 +1,16 @@
-"""classifier_node's parameters: names, defaults, ranges and checks."""
+"""classifier_node's interface: its topics, and its parameters' checks."""
 
 import math
 
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
                                 ParameterDescriptor)
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 
 from ..core.tracking import DEFAULT_TIMEOUT
+from . import node_interface
 
 
 def _floats(low, high):
@@ -15,6 +20,38 @@ def _floats(low, high):
 def _integers(low, high):
     return [IntegerRange(from_value=low, to_value=high, step=1)]
 
+
+SUMMARY = """
+Tells which building and floor the robot is on, and where, from WiFi scans:
+each scan on wifi/scan is answered on ~/place with the building, floor and
+class probabilities (and x, y with a model trained with positions),
+single-scan or tracked over the scans (tracking). The model file comes
+from train_model; the default is the shipped UJIIndoorLoc model.
+"""
+
+#: (role, name, type, what) of every topic and service the node offers.
+TOPICS = (
+    ('subscribes', 'wifi/scan', JointState,
+     'one WiFi scan: name = AP id (BSSID), position = RSSI dBm; sensor-data '
+     'QoS (best effort), the newest scan waits'),
+    ('publishes', '~/place', DiagnosticArray,
+     'the answer to each scan: building, floor, confidence, probabilities '
+     '(and x, y, position_sigma_m); reliable'),
+    ('publishes', '/diagnostics', DiagnosticArray,
+     'every answer, and a health status every second'),
+    ('publishes', '~/current_place', DiagnosticArray,
+     'the confident place, once per change; latched (transient local)'),
+    ('publishes', '~/pose', PoseWithCovarianceStamped,
+     'a model with positions: the position of each answer, in frame_id'),
+    ('publishes', 'initialpose', PoseWithCovarianceStamped,
+     'a model with positions: a confident answer to seed a localiser '
+     '(see publish_initial_pose, initial_pose_on_change)'),
+    ('service', '~/reset', Trigger,
+     'forget the tracked belief: the next scan starts afresh'),
+    ('service', '~/publish_initial_pose', Trigger,
+     'a model with positions: send the next confident answer on '
+     'initialpose'),
+)
 
 #: (name, default, descriptor) of every parameter, in declaration order.
 PARAMETERS = (
@@ -62,8 +99,7 @@ NEED_POSITION = ('publish_initial_pose', 'initial_pose_on_change')
 
 def declare(node):
     """Declare every parameter on ``node``; return {name: value}."""
-    return {name: node.declare_parameter(name, default, descriptor).value
-            for name, default, descriptor in PARAMETERS}
+    return node_interface.declare(node, PARAMETERS)
 
 
 def no_position(name):

@@ -1,15 +1,20 @@
 """
 The nodes' executables, and the stop request that SIGINT/SIGTERM make.
 
-Each executable catches SIGINT and SIGTERM before it imports its node
-(rclpy and numpy take a few hundred milliseconds), so a signal at any
-moment of start-up, or a repeated one during shutdown, only requests the
-stop that :func:`.runner.run` carries out. This module imports nothing
-heavy for that reason.
+With ``-h`` or ``--help`` (outside ``--ros-args``) an executable prints its
+help from the node's interface table and exits 0, before anything of ROS
+starts (so ``ros2 run ... --help`` works). Otherwise it catches SIGINT and
+SIGTERM before it imports its node (rclpy and numpy take a few hundred
+milliseconds), so a signal at any moment of start-up, or a repeated one
+during shutdown, only requests the stop that :func:`.runner.run` carries
+out. This module imports nothing heavy for that reason.
 """
 
 import importlib
 import signal
+import sys
+
+from .node_interface import asks_for_help, help_text
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _requests = []
@@ -43,21 +48,25 @@ def stop_requested():
     return bool(_requests)
 
 
-def _main(module):
+def _main(module, table):
+    if asks_for_help(sys.argv[1:]):
+        sys.stdout.write(help_text(module, importlib.import_module(
+            f'{__package__}.{table}')))
+        return 0
     catch_stop_signals()
     return importlib.import_module(f'{__package__}.{module}').main()
 
 
 def classifier_node():
     """Run ``classifier_node``; return its exit code."""
-    return _main('classifier_node')
+    return _main('classifier_node', 'classifier_parameters')
 
 
 def wifi_scanner_node():
     """Run ``wifi_scanner_node``; return its exit code."""
-    return _main('wifi_scanner_node')
+    return _main('wifi_scanner_node', 'scanner_parameters')
 
 
 def record_fingerprints():
     """Run ``record_fingerprints``; return its exit code."""
-    return _main('record_fingerprints')
+    return _main('record_fingerprints', 'recorder_parameters')

@@ -9,10 +9,11 @@ Progress (scans per building/floor) is logged and published on
 ``/diagnostics``, with the scans received, those with no usable reading,
 the readings left out and the scans lost before they reached the node.
 
-The output folder must be writable at start-up. A write that fails later
-(the folder gone, the disk full) makes the status ERROR and is logged
-(throttled); the scans wait in memory and are written by the next write
-that works (tried with every scan and every second). Those still waiting
+A missing output folder is created (``~`` stands for the home folder); it
+must be writable at start-up. A write that fails later (the folder gone,
+the disk full) makes the status ERROR and is logged (throttled); the scans
+wait in memory and are written by the next write that works (tried with
+every scan and every second). Those still waiting
 at shutdown go to a new file in the temporary folder (or the home folder),
 which the log names.
 
@@ -39,8 +40,6 @@ import tempfile
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
-                                ParameterDescriptor)
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data,
                        QoSPolicyKind, QoSProfile, ReliabilityPolicy)
@@ -48,6 +47,8 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
 from .messages import seconds, stamp_time
+from .node_interface import declare
+from .recorder_parameters import PARAMETERS
 from .runner import names_the_node, run
 from ..data.recording import FingerprintLog, frame_problem, RecordingError
 from .sequence import PublisherGaps
@@ -64,37 +65,19 @@ POSE_QOS_OVERRIDES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
 POSE_HISTORY = 500
 
 
-def _label(description):
-    return ParameterDescriptor(
-        description=description + '; -1: pause recording',
-        integer_range=[IntegerRange(from_value=-1, to_value=1000, step=1)])
-
-
 class RecordFingerprintsNode(Node):
     """Append labelled scans to a fingerprint CSV."""
 
     @names_the_node
     def __init__(self):
         super().__init__('record_fingerprints')
-        output = self.declare_parameter(
-            'output', '', ParameterDescriptor(
-                description='fingerprint CSV to create or continue',
-                read_only=True)).value
+        values = declare(self, PARAMETERS)
+        output, pose_topic = values['output'], values['pose_topic']
         if not output:
             raise RecordingError('parameter output (the CSV path) is not '
                                  'set')
-        self.declare_parameter('building', -1, _label('building label'))
-        self.declare_parameter('floor', -1, _label('floor label'))
-        pose_topic = self.declare_parameter(
-            'pose_topic', '', ParameterDescriptor(
-                description='geometry_msgs/PoseWithCovarianceStamped topic '
-                'whose x, y label each scan (e.g. /amcl_pose); empty: no '
-                'positions', read_only=True)).value
-        self.declare_parameter('max_pose_age', 2.0, ParameterDescriptor(
-            description='s: the largest time between a scan and the pose '
-            'that labels it', floating_point_range=[FloatingPointRange(
-                from_value=0.0, to_value=3600.0)]))
-        self.log = FingerprintLog(output, positions=bool(pose_topic))
+        self.log = FingerprintLog(Path(output).expanduser(),
+                                  positions=bool(pose_topic))
         self.counts = Counter(scans_received=0, scans_paused=0,
                               scans_unusable=0, scans_lost=0,
                               skipped_readings=0, write_errors=0)
@@ -119,7 +102,7 @@ class RecordFingerprintsNode(Node):
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.create_timer(1.0, self._publish_progress)
         self.get_logger().info(
-            f'recording to {output} ({sum(self.log.counts.values())} scans '
+            f'recording to {self.log.path} ({sum(self.log.counts.values())} scans '
             f'already there, {len(self.log.ap_ids)} APs)' + (
                 f', positions from {self._pose_sub.topic_name}'
                 if pose_topic else ''))

@@ -13,12 +13,15 @@ die of a late one.
 import contextlib
 import functools
 from pathlib import Path
+import re
 import sys
 
 import rclpy
 from rclpy.exceptions import NameValidationException, ParameterException
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
 
 from .executables import (catch_stop_signals, ignore_stop_signals,
                           stop_requested)
@@ -41,6 +44,24 @@ def names_the_node(init):
                 exc.node_logger = node.get_logger()
             raise
     return checked
+
+
+def ros_args_problem(args=None):
+    """
+    Return why the ``--ros-args`` of ``args`` (default sys.argv) are bad.
+
+    None if rcl parses them. Checked before ``rclpy.init``, whose failure
+    rcl also logs on a line of its own.
+    """
+    try:
+        remove_ros_args(args)
+    except rclpy_implementation.UnknownROSArgsError as exc:
+        return f'unknown ROS arguments {exc}'
+    except rclpy_implementation.RCLInvalidROSArgsError as exc:
+        # rcl's text, without its prefix and source positions
+        text = str(exc).removeprefix('Failed to parse ROS arguments: ')
+        return re.sub(r', at \S+:\d+', '', text)
+    return None
 
 
 def _cannot_start(exc):
@@ -66,9 +87,13 @@ def run(make_node, args=None, startup_errors=(ValueError,)):
 
 
 def _run(make_node, args, startup_errors):
+    problem = ros_args_problem(args)
+    if problem:
+        _cannot_start(f'--ros-args: {problem}')
+        return 1
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    except RuntimeError as exc:     # malformed --ros-args
+    except RuntimeError as exc:
         _cannot_start(exc)
         return 1
     try:

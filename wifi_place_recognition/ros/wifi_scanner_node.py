@@ -20,7 +20,6 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
@@ -28,7 +27,9 @@ from sensor_msgs.msg import JointState
 from ..data.wifi_sources import (drop_stale, interface_problem, SOURCES,
                                  SourceError, SourceRunner,
                                  wireless_interfaces)
+from .node_interface import declare
 from .runner import names_the_node, run
+from .scanner_parameters import PARAMETERS
 
 THROTTLE_S = 30.0
 
@@ -39,27 +40,11 @@ class WifiScannerNode(Node):
     @names_the_node
     def __init__(self):
         super().__init__('wifi_scanner_node')
-        self.interface = self.declare_parameter(
-            'interface', '', ParameterDescriptor(
-                description='wireless interface; empty: the first one '
-                            'found in /sys/class/net',
-                read_only=True)).value
-        self.period = self.declare_parameter(
-            'period', 2.0, ParameterDescriptor(
-                description='seconds between scans', read_only=True,
-                floating_point_range=[FloatingPointRange(
-                    from_value=0.1, to_value=3600.0)])).value
-        self.sources = list(self.declare_parameter(
-            'sources', ['iw', 'iw_dump', 'nmcli'], ParameterDescriptor(
-                description=f'tried in order; any of {sorted(SOURCES)}',
-                read_only=True)).value)
-        self.max_age = self.declare_parameter(
-            'max_age', 0.0, ParameterDescriptor(
-                description='readings of APs last seen longer ago (s) are '
-                            'dropped; 0: period + the scan command\'s run '
-                            'time',
-                floating_point_range=[FloatingPointRange(
-                    from_value=0.0, to_value=3600.0)])).value
+        values = declare(self, PARAMETERS)
+        self.interface = values['interface']
+        self.period = values['period']
+        self.sources = list(values['sources'])
+        self.max_age = values['max_age']
         problem = self.interface and interface_problem(self.interface)
         if problem:
             raise ValueError(problem)
