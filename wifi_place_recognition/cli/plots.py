@@ -39,6 +39,13 @@ def plot_evaluation(folder, model, fp, result, predictions, baseline=None):
     return written
 
 
+def plot_confusion(folder, result):
+    """Write ``confusion.png`` of an evaluation ``result``; return its path."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    return _confusion(_pyplot(), folder, result)
+
+
 def _confusion(plt, folder, result):
     matrix = np.asarray(result['confusion'], float)
     rows = matrix.sum(axis=1, keepdims=True)
