@@ -18,8 +18,8 @@ def generate_launch_description():
             default_value=os.path.join(share, 'config',
                                        'classifier_node.yaml'),
             description='YAML file with the parameters of classifier_node '
-                        '(model_path, thresholds: see the README); the '
-                        'default is the package\'s file of the defaults'),
+                        '(model_path, thresholds: see doc/parameters.md); '
+                        'the default is the package\'s file of the defaults'),
         DeclareLaunchArgument(
             'scan_topic', default_value='wifi/scan',
             description='topic of the WiFi scans (sensor_msgs/JointState: '

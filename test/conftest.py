@@ -6,7 +6,8 @@ test is marked with its tiers from what it uses (its code, its fixtures
 and the helpers they call), so new test files are sorted too:
 
 - ``ros``: ROS 2 (an rclpy node, a node process, messages);
-- ``dataset``: UJIIndoorLoc or WiFine (``dataset_file``, ``WIFINE``);
+- ``dataset``: UJIIndoorLoc or WiFine (``dataset_file``, ``WIFINE``, the
+  datasets of the docs' examples, ``EXAMPLE_DATA``);
 - ``system``: other processes (the executables, a venv, colcon);
 - ``stress``: a busy core, scan floods, signals at random moments;
 - ``linter``: flake8, pep257;
@@ -233,7 +234,7 @@ ROS_PACKAGES = {e.text for tag in ('depend', 'exec_depend') for e in
                 if not e.text.startswith('python3-')} | {
     'rclpy', 'wifi_place_recognition.ros'}
 #: What marks a test ``dataset``, ``system``, ``stress`` when it reaches it.
-DATASET_NAMES = {'dataset_file', 'DATASET', 'WIFINE'}
+DATASET_NAMES = {'dataset_file', 'DATASET', 'WIFINE', 'EXAMPLE_DATA'}
 SYSTEM_NAMES = {'run', 'python_module', 'subprocess'}
 STRESS_NAMES = {'busy_core', 'fuzz_scans', 'Harness'}
 

@@ -42,7 +42,7 @@ def add_data_arguments(parser, training=False):
     d = ReaderOptions()
     g = parser.add_argument_group(
         'reading fingerprint files (defaults read UJIIndoorLoc and '
-        'record_fingerprints files; see the README, "Fingerprint CSVs")')
+        'record_fingerprints files; see doc/training.md, "Fingerprint CSVs")')
     g.add_argument('--ap-columns', type=_names, default=(),
                    metavar='NAMES',
                    help='AP columns: comma-separated names or patterns '

@@ -40,7 +40,7 @@ def build_parser():
     defaults = TrainConfig()
     g = p.add_argument_group(
         'model and training (defaults: the paper\'s network plus what '
-        'cross-validation chose; see the README)')
+        'cross-validation chose; see doc/training.md)')
     for f in fields(TrainConfig):
         default = getattr(defaults, f.name)
         flag = '--' + f.name.replace('_', '-')

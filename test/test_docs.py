@@ -1,0 +1,140 @@
+"""
+The documentation: the site builds, its examples run, its files exist.
+
+- ``doc/`` builds with Sphinx (MyST pages, autodoc API pages) with
+  warnings as errors: a broken link or anchor, a missing page or picture,
+  a docstring that no longer parses fails;
+- every module of ``core``, ``data`` and ``training`` has an API entry;
+- the shell examples the pages mark runnable (an HTML comment
+  ``<!-- runnable -->`` on the line before a ``sh`` block: needs no
+  hardware and no ``ros2`` CLI) are taken from README.md and doc/*.md and
+  run as written, from the repository, with the venv's executables on
+  PATH and a fresh home folder;
+- ``benchmarks/results/README.md`` lists every result file, and the pages
+  it names cite it; the pictures are those ``benchmarks/figures.py``
+  draws from the committed JSON.
+"""
+
+import os
+from pathlib import Path
+import re
+import sys
+
+from conftest import REPO, run
+import pytest
+
+DOC = REPO / 'doc'
+PAGES = [REPO / 'README.md'] + sorted(DOC.glob('*.md'))
+RESULTS = REPO / 'benchmarks' / 'results'
+MARKER = '<!-- runnable -->'
+#: The datasets the examples name, beside the repository as in CI.
+EXAMPLE_DATA = REPO.parent / 'shared' / 'datasets'
+BLOCK = re.compile(r'^```(\w*)\n(.*?)^```$', re.M | re.S)
+
+
+def examples():
+    """Return [(page:line, shell text)] of the blocks marked runnable."""
+    found = []
+    for page in PAGES:
+        text = page.read_text()
+        for block in BLOCK.finditer(text):
+            before = text[:block.start()].rstrip('\n').rsplit('\n', 1)[-1]
+            if before.strip() == MARKER:
+                line = text[:block.start()].count('\n') + 1
+                found.append((f'{page.relative_to(REPO)}:{line}',
+                              block.group(1), block.group(2)))
+    return found
+
+
+def test_runnable_examples_are_found_and_are_shell():
+    found = examples()
+    markers = sum(p.read_text().count(MARKER) for p in PAGES)
+    assert len(found) == markers, 'a runnable marker not before a block'
+    assert [where for where, lang, _ in found if lang != 'sh'] == []
+    pages = {where.split(':')[0] for where, _, _ in found}
+    assert {'README.md', 'doc/start-here.md', 'doc/training.md',
+            'doc/your-building.md'} <= pages
+
+
+@pytest.mark.parametrize('where,lang,script', examples(),
+                         ids=[e[0] for e in examples()])
+def test_runnable_example_works_as_written(where, lang, script, tmp_path):
+    for path in re.findall(r'\.\./shared/datasets/[\w./-]+', script):
+        if not (REPO / path).exists():
+            pytest.skip(f'{path} not here ({EXAMPLE_DATA} absent)')
+    home = tmp_path / 'home'
+    home.mkdir()
+    env = dict(os.environ, HOME=str(home), PATH=os.pathsep.join(
+        [str(Path(sys.executable).parent), os.environ['PATH']]))
+    out = run(['bash', '-euo', 'pipefail', '-c', script], cwd=REPO,
+              env=env, timeout=600)
+    assert out.returncode == 0, f'{where}\n{script}\n{out.stdout[-3000:]}' \
+        f'\n{out.stderr[-3000:]}'
+
+
+def test_site_builds_with_warnings_as_errors(tmp_path):
+    out = run([sys.executable, '-m', 'sphinx', '-W', '--keep-going', '-q',
+               '-b', 'html', '-d', str(tmp_path / 'doctrees'), str(DOC),
+               str(tmp_path / 'html')], cwd=REPO)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert (tmp_path / 'html' / 'api' / 'core.html').exists()
+
+
+def test_api_pages_cover_every_module():
+    pages = ''.join((DOC / 'api' / f'{p}.md').read_text()
+                    for p in ('core', 'data', 'training'))
+    documented = set(re.findall(r'automodule:: (\S+)', pages))
+    package = REPO / 'wifi_place_recognition'
+    modules = {f'wifi_place_recognition.{m.parent.name}.{m.stem}'
+               for p in ('core', 'data', 'training')
+               for m in (package / p).glob('*.py') if m.stem != '__init__'}
+    assert sorted(modules - documented) == [], 'add to doc/api/'
+    assert sorted(documented - modules) == [], 'gone: remove from doc/api/'
+
+
+def _index():
+    """Return {file: (cited by, command)} of benchmarks/results/README.md."""
+    rows = {}
+    for line in (RESULTS / 'README.md').read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip('|').split('|')]
+        if len(cells) == 3 and re.fullmatch(r'`[\w.-]+`', cells[0]):
+            rows[cells[0].strip('`')] = tuple(cells[1:])
+    return rows
+
+
+def test_results_index_lists_every_file_and_who_cites_it():
+    index = _index()
+    files = {p.name for p in RESULTS.iterdir() if p.name != 'README.md'}
+    assert sorted(files - set(index)) == [], 'add to results/README.md'
+    assert sorted(set(index) - files) == [], 'gone: remove from the index'
+    for name, (cited_by, command) in index.items():
+        citing = re.findall(r'`([\w./-]+\.(?:md|py))`', cited_by)
+        assert citing, name
+        for page in citing:
+            assert name in (REPO / page).read_text(), (name, page)
+        assert command, name
+
+
+def _png_text(path):
+    """Return {key: text} of a PNG file's tEXt chunks."""
+    data, found = path.read_bytes()[8:], {}
+    while data:
+        size, kind = int.from_bytes(data[:4], 'big'), data[4:8]
+        if kind == b'tEXt':
+            key, _, value = data[8:8 + size].partition(b'\0')
+            found[key.decode()] = value.decode('latin-1')
+        data = data[12 + size:]
+    return found
+
+
+def test_pictures_are_drawn_from_the_committed_json(tmp_path):
+    out = run([sys.executable, str(REPO / 'benchmarks' / 'figures.py'),
+               '--out', str(tmp_path)], cwd=REPO)
+    assert out.returncode == 0, out.stderr
+    drawn = sorted(p.name for p in tmp_path.glob('*.png'))
+    assert drawn == sorted(p.name for p in (DOC / 'images').glob('*.png'))
+    for name in drawn:
+        # Same data: the JSON each picture records is the JSON of today.
+        committed = _png_text(DOC / 'images' / name).get('Source')
+        assert committed == _png_text(tmp_path / name)['Source'], \
+            f'doc/images/{name} is stale: run benchmarks/figures.py'
