@@ -82,11 +82,15 @@ class FusionParams:
                              f'{self.wifi_outlier!r}: expected < 1')
 
     def to_dict(self):
-        """Return a JSON-ready dict (``fit`` left out when empty)."""
-        out = asdict(self)
-        if out['fit'] is None:
-            del out['fit']
-        return out
+        """
+        Return a JSON-ready dict of the values that differ from the defaults.
+
+        A model file keeps what was fitted (and how): the other values
+        follow the code's defaults.
+        """
+        default = FusionParams()
+        return {k: v for k, v in asdict(self).items()
+                if v != getattr(default, k)}
 
     @classmethod
     def from_dict(cls, data):
@@ -190,15 +194,19 @@ class ParticleFilter:
 
     def start(self, xy):
         """Spread particles around a scan's position, every heading."""
-        p = self.params
-        n = int(p.particles)
-        self.state = np.empty((n, 4))
-        self.state[:, :2] = xy + p.start_sd * self.rng.standard_normal((n, 2))
-        self.state[:, 2] = self.rng.uniform(-math.pi, math.pi, n)
-        self.state[:, 3] = p.drift_mean + \
-            p.drift_sd * self.rng.standard_normal(n)
+        n = int(self.params.particles)
+        self.state = self._fresh(n, xy)
         self.weight = np.full(n, 1.0 / n)
         self.disagreeing = 0
+
+    def _fresh(self, n, xy):
+        """Return ``n`` particles around ``xy``, every heading, drift prior."""
+        p = self.params
+        state = np.empty((n, 4))
+        state[:, :2] = xy + p.start_sd * self.rng.standard_normal((n, 2))
+        state[:, 2] = self.rng.uniform(-math.pi, math.pi, n)
+        state[:, 3] = p.drift_mean + p.drift_sd * self.rng.standard_normal(n)
+        return state
 
     def move(self, forward, lateral, turn):
         """Apply one odometry step (robot frame at its start)."""
