@@ -37,6 +37,7 @@ from ..core.artifact import load_model, ModelFileError
 from .classifier_parameters import (check_frame, declare, no_position,
                                     RECOGNIZER_SETTINGS, refusal)
 from .messages import key_value as _kv, pose_message, stamp_time
+from .odometry_fusion import OdometryFusion
 from .place_changes import PlaceChanges
 from .runner import names_the_node, run
 from .sequence import PublisherGaps
@@ -82,6 +83,7 @@ class ClassifierNode(Node):
     def __init__(self, make_forward=None, **kwargs):
         super().__init__('classifier_node', **kwargs)
         values = declare(self)
+        self.odometry = None    # OdometryFusion, with a position model
         model_path = values['model_path'] or str(default_model_path())
         self.frame_id = values['frame_id']
         check_frame(self.frame_id)
@@ -117,6 +119,7 @@ class ClassifierNode(Node):
         self.create_timer(1.0, self._publish_health)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.pose_pub = self.initial_pose_pub = None
+        self._initial_pending = None    # (stamp s, reasons): fused, waiting
         if model.position is not None:
             self.pose_pub = self.create_publisher(
                 PoseWithCovarianceStamped, '~/pose', 10)
@@ -124,6 +127,10 @@ class ClassifierNode(Node):
                 PoseWithCovarianceStamped, 'initialpose', 1)
             self.create_service(Trigger, '~/publish_initial_pose',
                                 self._on_publish_initial_pose)
+            self.odometry = OdometryFusion(
+                self, model.fusion, values['odom_timeout'],
+                values['pose_rate'], self._publish_fused)
+            self.odometry.enable(values['fusion'])
         elif self._send_initial_pose or self.reseed_on_change:
             raise ValueError(no_position('publish_initial_pose' if
                                          self._send_initial_pose else
@@ -153,6 +160,11 @@ class ClassifierNode(Node):
                                            self.reseed_on_change)
         self.changes.jump_threshold = values.get(
             'jump_threshold', self.changes.jump_threshold)
+        if self.odometry is not None:
+            self.odometry.configure(values.get('odom_timeout'),
+                                    values.get('pose_rate'))
+            if 'fusion' in values:
+                self.odometry.enable(values['fusion'])
 
     def _on_publish_initial_pose(self, request, response):
         self._send_initial_pose = True
@@ -167,12 +179,16 @@ class ClassifierNode(Node):
 
     def _on_reset(self, request, response):
         tracker = self.recognizer.tracker
-        if tracker is None:
-            response.message = 'tracking is off: nothing to reset'
-        else:
+        cleared = []
+        if tracker is not None:
             tracker.reset()
-            response.message = 'tracked belief cleared: the next scan ' \
-                               'starts afresh'
+            cleared.append('tracked belief')
+        if self.odometry is not None and self.odometry.enabled:
+            self.odometry.reset()
+            cleared.append('fused pose')
+        response.message = (f'{" and ".join(cleared)} cleared: the next '
+                            f'scan starts afresh' if cleared else
+                            'tracking and fusion are off: nothing to reset')
         response.success = True
         self.get_logger().info(response.message)
         return response
@@ -221,9 +237,13 @@ class ClassifierNode(Node):
         confident = status.level == DiagnosticStatus.OK
         reasons = self.changes.follow(place, confident, stamp,
                                       self._frame(place))
-        if place.position is not None:
-            self._publish_pose(place, stamp, confident,
-                               reasons if self.reseed_on_change else [])
+        if place.position is None:
+            return
+        reasons = reasons if self.reseed_on_change else []
+        if self.odometry is not None and self.odometry.active:
+            self._fuse(place, stamp, confident, reasons)
+        else:
+            self._publish_pose(place, stamp, confident, reasons)
 
     def _publish_answer(self, status, stamp):
         out = DiagnosticArray(status=[status])
@@ -243,6 +263,32 @@ class ClassifierNode(Node):
     def _frame(self, place):
         return self.frame_id.format(building=place.building,
                                     floor=place.floor)
+
+    def _fuse(self, place, stamp, confident, reasons):
+        """Feed the scan's own position to the filter; initialpose waits."""
+        if confident and self._send_initial_pose:
+            self._send_initial_pose = False
+            reasons = reasons + ['requested']
+        if reasons:
+            self._initial_pending = (stamp, reasons)
+        self.odometry.scan(stamp, place.scan_position,
+                           (place.scan_building, place.scan_floor),
+                           confident)
+
+    def _publish_fused(self, fused, stamp, place):
+        """Publish a fused pose; on initialpose too if one waits for it."""
+        frame = self.frame_id.format(building=place[0], floor=place[1])
+        pose = pose_message(fused.xy, fused.cov, stamp, frame, fused.yaw)
+        self.pose_pub.publish(pose)
+        waiting = self._initial_pending
+        if waiting is not None and waiting[0] == stamp:
+            self._initial_pending = None
+            self.initial_pose_pub.publish(pose)
+            self.get_logger().info(
+                f'initialpose sent ({"; ".join(waiting[1])}): building '
+                f'{place[0]}, floor {place[1]}, x {fused.xy[0]:.2f}, y '
+                f'{fused.xy[1]:.2f}, yaw {math.degrees(fused.yaw):.0f} deg '
+                f'in {frame} (fused with odometry)')
 
     def _publish_pose(self, place, stamp, confident, reasons):
         pose = pose_message(place.position, place.position_cov, stamp,
@@ -291,11 +337,21 @@ class ClassifierNode(Node):
             _kv('model_cross_validated_building_floor_accuracy',
                 selection.get('accuracy_mean', '')),
         ]
+        level = DiagnosticStatus.OK
+        message = (f'{counts["answered"]} scans answered, '
+                   f'{counts["rejected"]} rejected, '
+                   f'{counts["dropped"]} dropped')
+        if self.odometry is not None:
+            problem, fusion_counts = self.odometry.health()
+            values += [_kv(k, v) for k, v in fusion_counts.items()]
+            values.append(_kv('fusion', 'on' if self.odometry.active else
+                              'off' if not self.odometry.enabled else
+                              'waiting for odometry'))
+            if problem:
+                level = DiagnosticStatus.WARN
+                message += f'; odometry: {problem}'
         status = DiagnosticStatus(
-            level=DiagnosticStatus.OK, name=f'{self.get_name()}: health',
-            message=f'{counts["answered"]} scans answered, '
-                    f'{counts["rejected"]} rejected, '
-                    f'{counts["dropped"]} dropped',
+            level=level, name=f'{self.get_name()}: health', message=message,
             hardware_id=self.model_path, values=values)
         out = DiagnosticArray(status=[status])
         out.header.stamp = self.get_clock().now().to_msg()

@@ -4,6 +4,7 @@ import math
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
                                 ParameterDescriptor)
 from sensor_msgs.msg import JointState
@@ -41,8 +42,13 @@ TOPICS = (
      'every answer, and a health status every second'),
     ('publishes', '~/current_place', DiagnosticArray,
      'the confident place, once per change; latched (transient local)'),
+    ('subscribes', 'odom', Odometry,
+     'the robot\'s odometry (pose in its odom frame); while it flows, each '
+     'answer\'s position is fused with it (fusion); sensor-data QoS'),
     ('publishes', '~/pose', PoseWithCovarianceStamped,
-     'a model with positions: the position of each answer, in frame_id'),
+     'a model with positions: the position of each answer, in frame_id; '
+     'with odometry, the fused pose with yaw, at every scan and '
+     'pose_rate times a second between scans'),
     ('publishes', 'initialpose', PoseWithCovarianceStamped,
      'a model with positions: a confident answer to seed a localiser '
      '(see publish_initial_pose, initial_pose_on_change)'),
@@ -89,6 +95,18 @@ PARAMETERS = (
                     'standard deviations of the previous answer\'s '
                     '(Mahalanobis distance)',
         floating_point_range=_floats(1.0, 100.0))),
+    ('fusion', True, ParameterDescriptor(
+        description='while odometry arrives on odom, fuse it with the WiFi '
+                    'positions (a particle filter over x, y, yaw; a model '
+                    'with positions); false: each answer\'s own position')),
+    ('odom_timeout', 1.0, ParameterDescriptor(
+        description='seconds a scan waits for odometry covering its stamp; '
+                    'then it is fused alone (WiFi only, WARN)',
+        floating_point_range=_floats(0.05, 60.0))),
+    ('pose_rate', 10.0, ParameterDescriptor(
+        description='fused poses per second on ~/pose between scans (0: at '
+                    'scans only)',
+        floating_point_range=_floats(0.0, 100.0))),
 )
 #: Parameters that :meth:`PlaceRecognizer.configure` takes, by name.
 RECOGNIZER_SETTINGS = ('min_confidence', 'min_known_aps', 'max_aps',
@@ -121,8 +139,8 @@ def check_frame(template):
 
 def refusal(name, value, has_position):
     """Return why ``value`` is refused for parameter ``name``, or None."""
-    if name in ('min_confidence', 'tracking_timeout', 'jump_threshold') \
-            and not math.isfinite(value):
+    if name in ('min_confidence', 'tracking_timeout', 'jump_threshold',
+                'odom_timeout', 'pose_rate') and not math.isfinite(value):
         return f'{name} must be finite'
     if name in NEED_POSITION and value and not has_position:
         return no_position(name)

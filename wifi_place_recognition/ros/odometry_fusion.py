@@ -26,6 +26,12 @@ ODOM_QOS.depth = 100
 THROTTLE_S = 5.0
 #: Seconds after a fault or a scan fused alone during which health is WARN.
 WARN_S = 10.0
+#: Names of :class:`.core.fusion.Fusion` counts in the health status.
+HEALTH_NAMES = {'odometry': 'odometry_received',
+                'scans_fused': 'fusion_scans_fused',
+                'scans_alone': 'fusion_scans_alone',
+                'scans_other_place': 'fusion_scans_other_place',
+                'restarts': 'fusion_restarts'}
 #: Scans kept waiting for odometry at most (more: the oldest forgotten).
 MAX_WAITING = 100
 
@@ -133,11 +139,10 @@ class OdometryFusion:
     def health(self):
         """Return (problem or None, {count name: value}) for diagnostics."""
         counts = self.fusion.counts
-        values = {f'odometry_{k}' if not k.startswith('odometry') else k:
-                  counts.get(k, 0) for k in
-                  ('odometry', 'odometry_same_stamp') + ODOMETRY_FAULTS + (
-                      'scans_fused', 'scans_alone', 'scans_other_place',
-                      'restarts')}
+        values = {HEALTH_NAMES.get(k, k): counts.get(k, 0) for k in
+                  ('odometry', 'odometry_same_stamp') + ODOMETRY_FAULTS +
+                  ('scans_fused', 'scans_alone', 'scans_other_place',
+                   'restarts')}
         what, when = self._last_problem
         recent = time.monotonic() - when < WARN_S
         return (what if recent else None), values

@@ -1,0 +1,262 @@
+"""
+Odometry fusion without ROS: the timeline, the filter, the drift fit, files.
+
+The stamp order (a scan waits for the odometry that covers its stamp),
+each odometry fault, WiFi alone when odometry stops, the model file's
+fusion section, ``fit_odometry`` on a run whose odometry drifts, and pose
+CSVs with errors that name the file, row and column.
+"""
+
+import math
+
+from conftest import python_module, run, surveyed_csv
+import numpy as np
+import pytest
+from test_artifact import _header_and_arrays, _write_npz
+from wifi_place_recognition.core.artifact import (_digest, load_model,
+                                                  ModelFileError, save_model)
+from wifi_place_recognition.core.fusion import Fusion, FusionLimits
+from wifi_place_recognition.core.odometry_fit import FitError, fit_odometry
+from wifi_place_recognition.core.particles import FusionParams, wrap
+from wifi_place_recognition.core.trajectory import fuse_offline, score
+from wifi_place_recognition.data.files import DataError
+from wifi_place_recognition.data.poses import read_poses
+
+PLACE = (0, 0)
+
+
+def straight(n=200, speed=0.5, drift=0.0, yaw=0.3):
+    """
+    Return (truth, odometry) rows (t, x, y, yaw) of a drive along x, 10 Hz.
+
+    The odometry starts at 0, 0 with heading ``yaw`` and loses ``drift``
+    rad per metre.
+    """
+    t = np.arange(n) * 0.1
+    truth = np.column_stack([t, speed * t, np.zeros(n), np.zeros(n)])
+    odo = [(0.0, 0.0, 0.0, yaw)]
+    for k in range(1, n):
+        step = speed * 0.1
+        _, x, y, a = odo[-1]
+        a2 = a - drift * step
+        odo.append((t[k], x + step * math.cos((a + a2) / 2),
+                    y + step * math.sin((a + a2) / 2), a2))
+    return truth, np.array(odo)
+
+
+def test_a_scan_waits_for_the_odometry_that_covers_its_stamp():
+    fusion = Fusion(seed=0)
+    truth, odo = straight(n=30)
+    for row in odo[:10]:
+        assert fusion.odometry(*row) == (None, [])
+    assert fusion.scan(1.05, [0.5, 0.0], PLACE) == []   # odometry at 0.9
+    fault, released = fusion.odometry(*odo[10])         # t = 1.0
+    assert fault is None and released == []
+    fault, released = fusion.odometry(*odo[11])         # t = 1.1: covered
+    assert [p.stamp for p in released] == [1.05]
+    assert released[0].with_odometry and released[0].restarted
+    # scans arriving out of order are applied in stamp order
+    for row in odo[12:20]:
+        fusion.odometry(*row)
+    assert fusion.scan(2.5, [1.2, 0.0], PLACE) == []
+    assert fusion.scan(2.2, [1.1, 0.0], PLACE) == []
+    released = []
+    for row in odo[20:30]:
+        released += fusion.odometry(*row)[1]
+    assert [p.stamp for p in released] == [2.2, 2.5]
+
+
+def test_each_odometry_fault_is_counted_and_skipped():
+    fusion = Fusion(seed=0)
+    assert fusion.odometry(1.0, 0.0, 0.0, 0.0)[0] is None
+    assert fusion.odometry(1.1, math.nan, 0.0, 0.0)[0] == 'odometry_invalid'
+    assert fusion.odometry(1.1, 0.0, math.inf, 0.0)[0] == 'odometry_invalid'
+    assert fusion.odometry(0.5, 0.0, 0.0, 0.0)[0] == 'odometry_out_of_order'
+    assert fusion.odometry(1.0, 0.01, 0.0, 0.0)[0] is None     # same stamp
+    assert fusion.odometry(1.1, 5.0, 0.0, 0.0)[0] == 'odometry_jump'
+    assert fusion.odometry(1.2, 5.0, 0.0, 2.0)[0] == 'odometry_jump'  # turn
+    assert fusion.odometry(1.3, 5.05, 0.0, 2.0)[0] is None  # re-anchored
+    assert fusion.counts['odometry_invalid'] == 2
+    assert fusion.counts['odometry_out_of_order'] == 1
+    assert fusion.counts['odometry_same_stamp'] == 1
+    assert fusion.counts['odometry_jump'] == 2
+    assert fusion.counts['odometry'] == 2
+
+
+def test_a_jump_in_odometry_does_not_move_the_pose():
+    fusion = Fusion(seed=0)
+    fusion.odometry(0.0, 0.0, 0.0, 0.0)
+    fusion.odometry(0.1, 0.0, 0.0, 0.0)
+    [start] = fusion.scan(0.05, [3.0, 4.0], PLACE)
+    fusion.odometry(0.2, 0.0, 0.0, 0.0)
+    fusion.odometry(0.3, 0.0, 0.0, 0.0)     # reset to zero ...
+    fusion.odometry(0.4, -80.0, 35.0, 1.0)  # ... then a jump: skipped
+    fusion.odometry(0.5, -80.0, 35.0, 1.0)
+    [after] = fusion.scan(0.45, [3.0, 4.0], PLACE)
+    assert np.linalg.norm(after.xy - start.xy) < 1.0
+
+
+def test_without_odometry_scans_are_applied_alone_after_the_timeout():
+    fusion = Fusion(limits=FusionLimits(odom_timeout=0.5), seed=0)
+    fusion.odometry(0.0, 0.0, 0.0, 0.0)
+    fusion.odometry(0.1, 0.0, 0.0, 0.0)
+    assert fusion.scan(0.05, [1.0, 1.0], PLACE)      # covered: fused
+    assert fusion.scan(3.0, [1.0, 1.0], PLACE, arrival=100.0) == []
+    assert fusion.expire(100.4) == []
+    [alone] = fusion.expire(100.6)
+    assert not alone.with_odometry and alone.stamp == 3.0
+    assert fusion.counts['scans_alone'] == 1
+    # odometry returns: fused again
+    fusion.odometry(3.5, 0.0, 0.0, 0.0)
+    fusion.odometry(3.6, 0.1, 0.0, 0.0)
+    [back] = fusion.scan(3.55, [1.0, 1.0], PLACE)
+    assert back.with_odometry
+
+
+def test_a_confident_scan_of_another_floor_restarts_there():
+    fusion = Fusion(seed=0)
+    fusion.odometry(0.0, 0.0, 0.0, 0.0)
+    fusion.odometry(2.0, 0.0, 0.0, 0.0)
+    fusion.scan(0.5, [0.0, 0.0], (0, 0))
+    assert fusion.scan(1.0, [20.0, 0.0], (0, 1), confident=False) == []
+    assert fusion.counts['scans_other_place'] == 1
+    [moved] = fusion.scan(1.5, [20.0, 0.0], (0, 1))
+    assert moved.restarted and fusion.place == (0, 1)
+    assert np.linalg.norm(moved.xy - [20.0, 0.0]) < 3.0
+
+
+def test_the_filter_finds_the_heading_and_follows_a_drifting_odometry():
+    """Odometry losing 2 degrees per metre; scans with 1 m noise."""
+    drift = math.radians(2.0)
+    truth, odo = straight(n=1200, drift=drift)
+    rng = np.random.default_rng(1)
+    at = np.arange(5, 1200, 10)
+    stamps = truth[at, 0] + 0.01
+    scans = truth[at, 1:3] + rng.normal(0, 1.0, (len(at), 2))
+    late = slice(len(at) // 2, None)
+    single = np.linalg.norm(scans - truth[at, 1:3], axis=1)[late].mean()
+    for params, share in ((FusionParams(), 0.8),     # drift unknown
+                          (FusionParams(drift_mean=drift, drift_sd=0.005),
+                           0.3)):                     # drift fitted
+        xy, yaw, cov = fuse_offline(odo, (stamps, scans),
+                                    Fusion(params, seed=0))
+        error = np.linalg.norm(xy - truth[at, 1:3], axis=1)
+        assert error[late].mean() < share * single, (params, share)
+    assert np.degrees(np.abs(wrap(yaw[late]))).max() < 5
+    figures = score(stamps, truth[at, 1:3], xy, truth[at, 3], yaw, cov)
+    assert 0.8 <= figures['in_95_ellipse'] <= 1.0
+
+
+def test_fusion_parameters_are_checked_and_kept_in_the_model_file(
+        tmp_path, surveyed_model):
+    with pytest.raises(ValueError, match='wifi_sd = 0'):
+        FusionParams(wifi_sd=0)
+    with pytest.raises(ValueError, match='particles = 2.5'):
+        FusionParams(particles=2.5)
+    with pytest.raises(ValueError, match='heading_noise = nan'):
+        FusionParams(heading_noise=math.nan)
+    with pytest.raises(ValueError, match='unknown fusion parameter'):
+        FusionParams.from_dict({'wifi_sigma': 3})
+    model = load_model(surveyed_model)
+    assert model.fusion is None
+    model.fusion = FusionParams(drift_mean=-0.02, fit={'windows': 4})
+    save_model(model, tmp_path / 'fused.npz')
+    again = load_model(tmp_path / 'fused.npz')
+    assert again.fusion == model.fusion
+    # the file keeps what differs from the defaults
+    assert model.fusion.to_dict() == {'drift_mean': -0.02,
+                                      'fit': {'windows': 4}}
+    header, arrays = _header_and_arrays(tmp_path / 'fused.npz')
+    header.pop('sha256')
+    header['fusion'] = {'drift_mean': 'a lot'}
+    header['sha256'] = _digest(header, {k: v for k, v in arrays.items()
+                                        if k != 'header'})
+    with pytest.raises(ModelFileError, match='fusion section: fusion '
+                                             'parameter drift_mean'):
+        load_model(_write_npz(tmp_path / 'bad.npz', header, arrays))
+
+
+def test_fit_odometry_finds_the_drift():
+    truth, odo = straight(n=1500, drift=math.radians(1.4))
+    # a run that turns: the truth turns, the odometry turns less
+    at = np.arange(0, 1500, 10)
+    params, report = fit_odometry(odo, truth[at, 0], truth[at, 1:3],
+                                  truth[at, 3])
+    assert report['drift_deg_per_m'] == pytest.approx(1.4, abs=0.05)
+    assert params.drift_mean == pytest.approx(math.radians(1.4), abs=1e-3)
+    assert params.fit['windows'] == report['windows']
+    with pytest.raises(FitError, match='covers 1.0 m'):
+        fit_odometry(odo[:21], truth[:21:10, 0], truth[:21:10, 1:3],
+                     truth[:21:10, 3])
+    with pytest.raises(FitError, match='finite'):
+        fit_odometry(np.full((5, 4), np.nan), truth[at, 0], truth[at, 1:3],
+                     truth[at, 3])
+
+
+def test_pose_files_name_what_is_wrong(tmp_path):
+    good = tmp_path / 'odom.csv'
+    good.write_text('TIMESTAMP,X,Y,YAW\n1.0,0,0,0.5\n1.1,0.1,0,0.5\n')
+    assert read_poses(good).tolist() == [[1.0, 0, 0, 0.5],
+                                         [1.1, 0.1, 0, 0.5]]
+    cases = {'TIMESTAMP,X,Y\n1,2,3\n': 'no column.s. YAW',
+             'TIMESTAMP,X,Y,YAW\n1,2,,3\n': "row 2, column Y: value ''",
+             'TIMESTAMP,X,Y,YAW\n1,2,3,nan\n': 'row 2, column YAW',
+             'TIMESTAMP,X,Y,YAW\n2,0,0,0\n1,0,0,0\n':
+                 'row 3, column TIMESTAMP: 1.0 is earlier',
+             'TIMESTAMP,X,Y,YAW\n1,2,3\n': 'row 2 has 3 fields',
+             'TIMESTAMP,X,Y,YAW\n': 'no poses'}
+    for text, message in cases.items():
+        bad = tmp_path / 'bad.csv'
+        bad.write_text(text)
+        with pytest.raises(DataError, match=message):
+            read_poses(bad)
+    with pytest.raises(DataError, match='cannot read'):
+        read_poses(tmp_path / 'missing.csv')
+
+
+def test_fit_odometry_command_writes_the_fusion_section(tmp_path,
+                                                        surveyed_model):
+    truth, odo = straight(n=1500, drift=math.radians(-1.0))
+    np.savetxt(tmp_path / 'odom.csv', odo, delimiter=',',
+               header='TIMESTAMP,X,Y,YAW', comments='', fmt='%.6f')
+    survey = surveyed_csv(tmp_path / 'survey.csv', scans_per_floor=150,
+                          floors=(0,))
+    lines = survey.read_text().splitlines()
+    at = np.arange(0, 1500, 10)
+    header = lines[0] + ',TIMESTAMP,YAW'
+    rows = [line + f',{truth[i, 0]:.3f},{truth[i, 3]:.4f}'
+            for line, i in zip(lines[1:], at)]
+    # X, Y of the run: the truth (surveyed_csv's X, Y replaced)
+    cols = header.split(',')
+    x, y = cols.index('X'), cols.index('Y')
+    fixed = []
+    for row, i in zip(rows, at):
+        cells = row.split(',')
+        cells[x], cells[y] = f'{truth[i, 1]:.3f}', f'{truth[i, 2]:.3f}'
+        fixed.append(','.join(cells))
+    scans = tmp_path / 'scans.csv'
+    scans.write_text('\n'.join([header] + fixed) + '\n')
+    out = tmp_path / 'fitted.npz'
+    result = run(python_module('cli.fit_odometry', '--model', surveyed_model,
+                               '--data', scans, '--odometry',
+                               tmp_path / 'odom.csv', '-o', out))
+    assert result.returncode == 0, result.stderr
+    assert 'heading drift -1.000 deg/m' in result.stdout
+    assert load_model(out).fusion.drift_mean == pytest.approx(
+        math.radians(-1.0), abs=1e-4)
+    # bad input: one error line, exit 2, nothing written
+    no_yaw = tmp_path / 'no_yaw.csv'
+    no_yaw.write_text(survey.read_text())
+    for args, message in (
+            (['--data', no_yaw, '--odometry', tmp_path / 'odom.csv'],
+             'needs TIMESTAMP, X, Y and YAW'),
+            (['--data', scans, '--odometry', survey],
+             'no column(s) TIMESTAMP, YAW'),
+            (['--data', scans, '--odometry', tmp_path / 'none.csv'],
+             'cannot read')):
+        bad = run(python_module('cli.fit_odometry', '--model',
+                                surveyed_model, *args, '-o',
+                                tmp_path / 'x.npz'))
+        assert bad.returncode == 2 and message in bad.stderr, bad.stderr
+        assert 'Traceback' not in bad.stderr
+        assert not (tmp_path / 'x.npz').exists()
