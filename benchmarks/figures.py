@@ -13,7 +13,10 @@ The documentation's pictures, drawn from the benchmarks' committed JSON.
 - ``tracking-walks.png``: per walk, what tracking gained or lost in
   building+floor accuracy against single scans
   (``results/tracking-wifine-test.json``,
-  ``tracking-ujiindoorloc-public.json``).
+  ``tracking-ujiindoorloc-public.json``);
+- ``robot-run.png``: one robot run per building, true path, each scan
+  alone, odometry alone and the pose fused with odometry
+  (``results/fusion.json``, ``benchmarks/fusion.py``).
 
 Needs matplotlib; reads nothing but the JSON. Each PNG records the
 SHA-256 of the JSON it was drawn from (its ``Source`` text), so a picture
@@ -195,6 +198,39 @@ def draw_tracking(out):
                  [name for name, _ in TRACKING_RUNS])
 
 
+FUSION_FILE = 'fusion.json'
+
+
+def draw_robot(out):
+    """Draw ``robot-run.png``; return its path."""
+    pairs = {name: pair for name, pair in _load(FUSION_FILE)['pairs'].items()
+             if 'trajectory' in pair}
+    fig, axes = plt.subplots(1, len(pairs), figsize=(5 * len(pairs), 5))
+    for ax, (name, pair) in zip(np.atleast_1d(axes), pairs.items()):
+        path = {k: np.array(v) for k, v in pair['trajectory'].items()}
+        fused = np.mean([r['mean_m'] for r in pair['fused_fitted']])
+        for key, style, label in (
+                ('odometry', dict(color='0.7', lw=1),
+                 f'odometry alone ({pair["odometry"]["mean_m"]:.1f} m)'),
+                ('single', dict(color='tab:orange', lw=0, marker='.',
+                                ms=3), f'each scan alone '
+                                       f'({pair["single"]["mean_m"]:.2f} m)'),
+                ('truth', dict(color='k', lw=2), 'truth (AMCL)'),
+                ('fused', dict(color='tab:blue', lw=1.2),
+                 f'fused ({fused:.2f} m)')):
+            ax.plot(path[key][:, 0], path[key][:, 1], label=label, **style)
+        truth = path['truth']
+        pad = 5
+        ax.set_xlim(truth[:, 0].min() - pad, truth[:, 0].max() + pad)
+        ax.set_ylim(truth[:, 1].min() - pad, truth[:, 1].max() + pad)
+        ax.set_aspect('equal')
+        ax.set_title(f'{name} (mean error)', fontsize=9)
+        ax.set_xlabel('x (m, map)')
+        ax.legend(fontsize=7, loc='best')
+        ax.grid(alpha=0.3)
+    return _save(fig, out / 'robot-run.png', [FUSION_FILE])
+
+
 def _save(fig, path, files, tight=True):
     if tight:
         fig.tight_layout()
@@ -210,7 +246,7 @@ def main():
                    help='folder of the pictures (default: doc/images)')
     out = p.parse_args().out
     out.mkdir(parents=True, exist_ok=True)
-    for draw in (draw_panel, draw_confusion, draw_tracking):
+    for draw in (draw_panel, draw_confusion, draw_tracking, draw_robot):
         print(draw(out))
 
 
