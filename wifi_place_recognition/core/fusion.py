@@ -225,7 +225,6 @@ class Fusion:
             else:
                 self._move_to(pose)
         else:
-            self.counts['scans_without_odometry'] += 1
             self.anchor = None
             if not restart and self.last_scan is not None:
                 self.filter.spread(max(stamp - self.last_scan, 0.0))
