@@ -6,12 +6,13 @@ with its default, range and description, and every topic; the running
 nodes must declare exactly those parameters and use exactly those topics.
 """
 
+import ast
 import os
 from pathlib import Path
 import subprocess
 import sys
 
-from conftest import run, wait_until
+from conftest import REPO, run, wait_until
 import pytest
 from rcl_interfaces.srv import ListParameters
 from wifi_place_recognition.ros import (classifier_parameters,
@@ -23,7 +24,24 @@ BIN = Path(sys.executable).parent
 TABLES = {'classifier_node': classifier_parameters,
           'wifi_scanner_node': scanner_parameters,
           'record_fingerprints': recorder_parameters}
-OFFLINE = ('train_model', 'evaluate_model', 'replay_scans', 'fit_tracking')
+
+
+def _console_scripts():
+    """Return {executable: entry point} from setup.py's console_scripts."""
+    tree = ast.parse((REPO / 'setup.py').read_text())
+    listed = next(ast.literal_eval(node.value) for node in tree.body
+                  if isinstance(node, ast.Assign) and
+                  getattr(node.targets[0], 'id', '') == 'console_scripts')
+    return dict(map(str.strip, entry.split('=')) for entry in listed)
+
+
+EXECUTABLES = _console_scripts()
+OFFLINE = sorted(name for name, entry in EXECUTABLES.items()
+                 if '.ros.' not in entry)
+
+
+def test_every_node_executable_has_an_interface_table():
+    assert set(TABLES) == set(EXECUTABLES) - set(OFFLINE)
 
 
 def _default(value):
@@ -151,7 +169,8 @@ def _parameters(ros, node):
 NODES = {
     'classifier_node': [],      # the shipped model has positions
     'wifi_scanner_node': ['-p', 'interface:=lo', '-p', 'sources:=[nmcli]'],
-    'record_fingerprints': ['-p', 'pose_topic:=/amcl_pose'],
+    'record_fingerprints': ['-p', 'pose_topic:=/amcl_pose',
+                            '-p', 'odom_topic:=odom'],
 }
 
 

@@ -1,13 +1,16 @@
-"""The recorder when it cannot write: one line at start-up, no scan lost."""
+"""The recorder when it cannot write: one line at start-up, nothing lost."""
 
 import os
 from pathlib import Path
 
 from conftest import python_module, run, wait_until
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from nav_msgs.msg import Odometry
 import pytest
+from rclpy.qos import qos_profile_sensor_data
 from ros_helpers import NodeProcess, RELIABLE
 from sensor_msgs.msg import JointState
+from wifi_place_recognition.data.poses import read_poses
 from wifi_place_recognition.ros.messages import status_values
 
 AP1, AP2, AP3 = 'aa:bb:cc:00:00:01', 'aa:bb:cc:00:00:02', 'aa:bb:cc:00:00:03'
@@ -151,3 +154,80 @@ def test_a_folder_that_disappears_loses_no_scan_and_the_node_runs_on(
     assert _stamps(saved) == [7, 8]
     assert _stamps(tmp_path / 'survey.moved' / 'rec.csv') == [1, 2, 3]
     assert _stamps(tmp_path / 'survey.second' / 'rec.csv') == [4, 5, 6]
+
+
+def _odometry(stamp):
+    msg = Odometry()
+    msg.header.stamp.sec = stamp
+    msg.pose.pose.position.x = float(stamp)
+    msg.pose.pose.orientation.w = 1.0
+    return msg
+
+
+def test_odometry_that_cannot_be_written_waits_and_none_is_lost(
+        ros, tmp_path):
+    survey = tmp_path / 'survey'
+    survey.mkdir()
+    tmp = tmp_path / 'tmp'
+    tmp.mkdir()
+    recorder = NodeProcess(tmp_path, python_module(
+        'ros.record_fingerprints', '--ros-args', '-p',
+        f'output:={survey / "walk.csv"}', '-p', 'odom_topic:=odom'),
+        'lost_odometry', env=dict(os.environ, TMPDIR=str(tmp)))
+    side = Recorder(ros, 'lost_odometry')
+    odom = ros.create_publisher(Odometry, 'odom', qos_profile_sensor_data)
+
+    def send(*stamps):
+        for stamp in stamps:
+            before = int(side.value('odometry_received') or 0)
+            for _ in range(5):
+                odom.publish(_odometry(stamp))
+                if wait_until(lambda: int(side.value('odometry_received') or
+                                          0) > before, 3, ros):
+                    break
+            else:
+                raise AssertionError(f'odometry {stamp} not received')
+
+    def wait(level, waiting):
+        assert wait_until(lambda: side.status is not None and
+                          side.status.level == level and
+                          side.value('odometry_waiting') == str(waiting),
+                          10, ros), side.status
+    try:
+        assert wait_until(lambda: odom.get_subscription_count() and
+                          side.status, 30, ros), recorder.stop()[1]
+        send(1, 2, 3)
+        wait(DiagnosticStatus.OK, 0)
+        assert side.value('odometry_written') == '3'
+        # The folder is moved away: the poses wait in memory, status ERROR.
+        survey.rename(tmp_path / 'survey.moved')
+        send(4, 5, 6)
+        wait(DiagnosticStatus.ERROR, 3)
+        assert 'cannot write walk.odom.csv: ' in side.status.message
+        assert side.value('odometry_write_errors') == '1'
+        # It comes back: the waiting poses are written to a new file.
+        survey.mkdir()
+        wait(DiagnosticStatus.OK, 0)
+        assert side.value('odometry_written') == '6'
+        # A file where the folder was, until shutdown.
+        survey.rename(tmp_path / 'survey.second')
+        survey.write_text('')
+        send(7, 8)
+        wait(DiagnosticStatus.ERROR, 2)
+        assert side.value('odometry_write_errors') == '2'
+        assert recorder.proc.poll() is None
+    finally:
+        ros.destroy_publisher(odom)
+        side.close()
+        code, log = recorder.stop()
+    assert code == 0 and 'Traceback' not in log, log
+    assert 'works again: the odometry poses kept in memory' in log, log
+    saved, = tmp.glob('walk.odom.unsaved-*.csv')
+    assert f'the 2 odometry poses not in it are saved in {saved}' in log, log
+
+    def stamps(path):
+        return read_poses(path)[:, 0].tolist()
+    assert stamps(tmp_path / 'survey.moved' / 'walk.odom.csv') == [1, 2, 3]
+    assert stamps(tmp_path / 'survey.second' / 'walk.odom.csv') == [4, 5, 6]
+    assert stamps(saved) == [7, 8]
+    assert read_poses(saved)[:, 1].tolist() == [7.0, 8.0]

@@ -1,6 +1,7 @@
 """Recording positions: the X, Y, FRAME columns and a pose topic over ROS."""
 
 import math
+from pathlib import Path
 import time
 
 from conftest import python_module, run, wait_until
@@ -13,7 +14,10 @@ from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data, QoSProfile,
 from ros_helpers import Client, NodeProcess
 from sensor_msgs.msg import JointState
 from wifi_place_recognition.data.fingerprints import read_fingerprints
-from wifi_place_recognition.data.recording import FingerprintLog, RecordingError
+from wifi_place_recognition.data.poses import read_poses
+from wifi_place_recognition.data.recording import (FingerprintLog,
+                                                   odometry_path, PoseLog,
+                                                   RecordingError)
 from wifi_place_recognition.ros.messages import status_values
 
 AP1, AP2 = 'aa:bb:cc:00:00:01', 'aa:bb:cc:00:00:02'
@@ -28,25 +32,28 @@ RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 def test_positions_are_columns_that_train_model_reads(tmp_path):
     path = tmp_path / 'rec.csv'
     log = FingerprintLog(path, positions=True)
-    assert log.add([AP1], [-50.0], 0, 1, 10.0, (1.5, -2.25, 'map')) == \
+    assert log.add([AP1], [-50.0], 0, 1, 10.0, (1.5, -2.25, 0.5, 'map')) == \
         (True, 0)
     # A new AP rewrites the file with the wider header: positions stay.
-    log.add([AP1, AP2], [-55.0, -70.0], 0, 2, 11.0, (3.0, 4.0, 'map_f2'))
-    log.add([AP2], [-60.0], 0, 2, 12.0, (-7600.125, 4864900.5, 'map_f2'))
+    log.add([AP1, AP2], [-55.0, -70.0], 0, 2, 11.0,
+            (3.0, 4.0, -3.1416, 'map_f2'))
+    log.add([AP2], [-60.0], 0, 2, 12.0,
+            (-7600.125, 4864900.5, 0.0, 'map_f2'))
     assert path.read_text().splitlines()[0] == \
-        f'BUILDINGID,FLOOR,TIMESTAMP,X,Y,FRAME,{AP1},{AP2}'
+        f'BUILDINGID,FLOOR,TIMESTAMP,X,Y,YAW,FRAME,{AP1},{AP2}'
     fp = read_fingerprints(path)
     assert fp.position_columns == ('X', 'Y')
     np.testing.assert_array_equal(fp.position, [[1.5, -2.25], [3.0, 4.0],
                                                 [-7600.125, 4864900.5]])
     assert fp.meta['FRAME'].tolist() == ['map', 'map_f2', 'map_f2']
+    assert fp.meta['YAW'].astype(float).tolist() == [0.5, -3.1416, 0.0]
     assert fp.ap_ids == (AP1, AP2)
     np.testing.assert_array_equal(fp.rssi, [[-50, np.nan], [-55, -70],
                                             [np.nan, -60]])
     assert fp.notes == []           # FRAME is known metadata, not a guess
     # A frame that is a number is metadata too, never an AP.
     FingerprintLog(path, positions=True).add([AP1], [-40.0], 0, 1, 13.0,
-                                             (0.0, 0.0, '-50'))
+                                             (0.0, 0.0, 0.0, '-50'))
     fp = read_fingerprints(path)
     assert fp.ap_ids == (AP1, AP2) and fp.notes == []
 
@@ -54,12 +61,12 @@ def test_positions_are_columns_that_train_model_reads(tmp_path):
 def test_a_torn_line_is_cut_and_positions_continue(tmp_path):
     path = tmp_path / 'rec.csv'
     FingerprintLog(path, positions=True).add([AP1], [-50.0], 1, 2, 1.0,
-                                             (1.0, 2.0, 'map'))
+                                             (1.0, 2.0, 0.0, 'map'))
     with open(path, 'a') as f:
         f.write('1,2,2.000,3.0')        # killed mid-append
     log = FingerprintLog(path, positions=True)
     assert log.counts == {(1, 2): 1}
-    log.add([AP1], [-51.0], 1, 2, 3.0, (5.0, 6.0, 'map'))
+    log.add([AP1], [-51.0], 1, 2, 3.0, (5.0, 6.0, 0.0, 'map'))
     fp = read_fingerprints(path)
     np.testing.assert_array_equal(fp.position, [[1.0, 2.0], [5.0, 6.0]])
 
@@ -68,7 +75,7 @@ def test_a_file_keeps_the_way_it_started(tmp_path):
     plain, placed = tmp_path / 'plain.csv', tmp_path / 'placed.csv'
     FingerprintLog(plain).add([AP1], [-50.0], 0, 0, 1.0)
     FingerprintLog(placed, positions=True).add([AP1], [-50.0], 0, 0, 1.0,
-                                               (1.0, 2.0, 'map'))
+                                               (1.0, 2.0, 0.0, 'map'))
     with pytest.raises(RecordingError, match='without positions .*cannot '
                        'add positions half-way'):
         FingerprintLog(plain, positions=True)
@@ -84,13 +91,100 @@ def test_a_position_needs_a_writable_frame(tmp_path):
     log = FingerprintLog(tmp_path / 'rec.csv', positions=True)
     for frame in ('', 'map,2', 'map\n', 'a"b'):
         with pytest.raises(RecordingError, match='frame_id'):
-            log.add([AP1], [-50.0], 0, 0, 1.0, (1.0, 2.0, frame))
+            log.add([AP1], [-50.0], 0, 0, 1.0, (1.0, 2.0, 0.0, frame))
     with pytest.raises(ValueError, match='position'):
         log.add([AP1], [-50.0], 0, 0, 1.0)
     with pytest.raises(ValueError, match='position'):
         FingerprintLog(tmp_path / 'plain.csv').add([AP1], [-50.0], 0, 0, 1.0,
-                                                   (1.0, 2.0, 'map'))
+                                                   (1.0, 2.0, 0.0, 'map'))
     assert not (tmp_path / 'rec.csv').exists()
+
+
+def test_a_file_without_yaw_goes_on_without_it(tmp_path):
+    # As an earlier recorder wrote it: X, Y, FRAME, no YAW.
+    path = tmp_path / 'old.csv'
+    path.write_text(f'BUILDINGID,FLOOR,TIMESTAMP,X,Y,FRAME,{AP1}\n'
+                    f'0,1,1.000,1.000,2.000,map,-50\n')
+    log = FingerprintLog(path, positions=True)
+    assert not log.yaw and log.counts == {(0, 1): 1}
+    log.add([AP1, AP2], [-51.0, -60.0], 0, 1, 2.0, (3.0, 4.0, 1.5, 'map'))
+    log.add([AP2], [-61.0], 0, 1, 3.0, (5.0, 6.0, 1.5, 'map'))
+    header, *rows = path.read_text().splitlines()
+    assert header == f'BUILDINGID,FLOOR,TIMESTAMP,X,Y,FRAME,{AP1},{AP2}'
+    assert rows[1:] == ['0,1,2.000,3.000,4.000,map,-51,-60',
+                        '0,1,3.000,5.000,6.000,map,100,-61']
+    fp = read_fingerprints(path)
+    assert fp.ap_ids == (AP1, AP2) and 'YAW' not in fp.meta
+    np.testing.assert_array_equal(fp.position, [[1, 2], [3, 4], [5, 6]])
+    assert FingerprintLog(tmp_path / 'new.csv', positions=True).yaw
+
+
+def test_odometry_file_is_named_after_the_output():
+    assert odometry_path('/a/walk1.csv') == Path('/a/walk1.odom.csv')
+    assert odometry_path('/a/walk1.CSV') == Path('/a/walk1.odom.csv')
+    assert odometry_path('walk1') == Path('walk1.odom.csv')
+    assert odometry_path('/a/b.c/walk') == Path('/a/b.c/walk.odom.csv')
+
+
+def test_a_pose_log_writes_what_read_poses_reads_in_batches(tmp_path):
+    path = tmp_path / 'walk.odom.csv'
+    log = PoseLog(path)
+    assert log.add(10.0, 1.0, -2.0, 3.1) is None
+    assert log.add(10.1, 1.05, -2.0, -3.1) is None
+    assert not path.exists()                # written by flush, in a batch
+    assert log.flush() and log.written == 2 and not log.pending
+    # refused: what read_poses would refuse; an equal stamp is kept
+    assert log.add(math.nan, 0.0, 0.0, 0.0)[0] == 'invalid'
+    assert log.add(10.2, math.inf, 0.0, 0.0)[0] == 'invalid'
+    kind, why = log.add(10.05, 0.0, 0.0, 0.0)
+    assert kind == 'out_of_order' and '10.050000 is earlier than the last ' \
+        'recorded, 10.100000' in why
+    assert log.add(10.1, 1.1, -2.0, -3.1) is None
+    assert log.flush()
+    np.testing.assert_allclose(read_poses(path), [
+        [10.0, 1.0, -2.0, 3.1], [10.1, 1.05, -2.0, -3.1],
+        [10.1, 1.1, -2.0, -3.1]])
+    # A kill mid-write: the torn line is cut, the file continues, and a
+    # stamp before the last in the file is refused.
+    with open(path, 'a') as f:
+        f.write('10.200000,1.2')
+    log = PoseLog(path)
+    assert log.add(10.0, 0.0, 0.0, 0.0)[0] == 'out_of_order'
+    log.add(10.3, 1.3, -2.0, -3.0)
+    log.flush()
+    assert read_poses(path)[:, 0].tolist() == [10.0, 10.1, 10.1, 10.3]
+    assert path.read_text().count('TIMESTAMP') == 1
+
+
+def test_a_pose_log_keeps_rows_it_cannot_write_and_other_files_alone(
+        tmp_path):
+    folder = tmp_path / 'survey'
+    log = PoseLog(folder / 'walk.odom.csv')
+    log.add(1.0, 0.0, 0.0, 0.0)
+    log.flush()
+    folder.rename(tmp_path / 'moved')
+    log.add(2.0, 1.0, 0.0, 0.0)
+    log.add(3.0, 2.0, 0.0, 0.0)
+    assert not log.flush() and isinstance(log.write_error, OSError)
+    assert len(log.pending) == 2 and log.written == 1
+    folder.mkdir()                  # back: a new file, with its header
+    assert log.flush() and log.write_error is None
+    assert read_poses(folder / 'walk.odom.csv')[:, 0].tolist() == [2.0, 3.0]
+    log.add(4.0, 3.0, 0.0, 0.0)
+    saved = log.save_pending(tmp_path)
+    assert saved.name.startswith('walk.odom.unsaved-')
+    assert saved.suffix == '.csv' and not log.pending
+    assert read_poses(saved).tolist() == [[4.0, 3.0, 0.0, 0.0]]
+    # Not a pose file, or no complete header: refused, left as it is.
+    for text, problem in (('BUILDINGID,FLOOR\n', 'not a pose recording'),
+                          ('TIMESTAMP,X', 'no complete header line'),
+                          ('TIMESTAMP,X,Y,YAW\nx,1,2,3\n',
+                           "row 2, column TIMESTAMP: 'x'")):
+        other = tmp_path / 'other.csv'
+        other.write_text(text)
+        with pytest.raises(RecordingError, match=problem):
+            PoseLog(other)
+        assert other.read_text() == text
 
 
 # the recorder over ROS ---------------------------------------------------------
@@ -220,7 +314,8 @@ def test_a_file_is_continued_only_the_way_it_started(tmp_path, positions,
                                                      pose_topic, problem):
     path = tmp_path / 'rec.csv'
     FingerprintLog(path, positions).add(
-        [AP1], [-50.0], 0, 0, 1.0, (1.0, 2.0, 'map') if positions else None)
+        [AP1], [-50.0], 0, 0, 1.0,
+        (1.0, 2.0, 0.0, 'map') if positions else None)
     before = path.read_bytes()
     result = run(python_module(
         'ros.record_fingerprints', '--ros-args', '-p', f'output:={path}',

@@ -17,11 +17,20 @@ every scan and every second). Those still waiting
 at shutdown go to a new file in the temporary folder (or the home folder),
 which the log names.
 
-With ``pose_topic`` (e.g. ``/amcl_pose``), each scan also gets the x, y
-and frame of the pose nearest to it in time (scan and pose ``header.stamp``;
-a zero stamp means the time the node takes the message), if that pose is
-at most ``max_pose_age`` seconds older or newer; other scans are counted
-and skipped.
+With ``pose_topic`` (e.g. ``/amcl_pose``), each scan also gets the x, y,
+yaw and frame of the pose nearest to it in time (scan and pose
+``header.stamp``; a zero stamp means the time the node takes the message),
+if that pose is at most ``max_pose_age`` seconds older or newer; other
+scans are counted and skipped. A file of an earlier recorder, without
+``YAW``, goes on without it (logged).
+
+With ``odom_topic`` (``nav_msgs/Odometry``), every odometry pose is kept
+(stamp, x, y, yaw) for the pose CSV beside the output
+(:func:`.data.recording.odometry_path`: ``walk1.csv`` ->
+``walk1.odom.csv``), written once a second in one batch, with the same
+care as the scans (waiting in memory, a fallback file at shutdown).
+Poses that are not finite, not a unit quaternion or earlier than the last
+one kept are counted and skipped (``fit_odometry`` needs them in order).
 
 The scan subscription is best effort (it must match the scanner's
 sensor-data publisher) with a deep queue: rewriting a large file for a new
@@ -29,6 +38,7 @@ AP can take a second, and the scans arriving meanwhile wait instead of
 being lost. The pose subscription is best effort and volatile, so it
 matches reliable and transient-local publishers (AMCL's) as well as
 sensor-data ones; parameters can override its reliability and durability.
+The odometry subscription is the same, with a deeper queue.
 """
 
 from collections import Counter, deque
@@ -40,17 +50,19 @@ import tempfile
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data,
                        QoSPolicyKind, QoSProfile, ReliabilityPolicy)
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
-from .messages import seconds, stamp_time
+from .messages import seconds, stamp_time, yaw_of
 from .node_interface import declare
 from .recorder_parameters import PARAMETERS
 from .runner import names_the_node, run
-from ..data.recording import FingerprintLog, frame_problem, RecordingError
+from ..data.recording import (FingerprintLog, frame_problem,
+                              odometry_path, PoseLog, RecordingError)
 from .sequence import PublisherGaps
 
 PROGRESS_EVERY = 20
@@ -59,10 +71,26 @@ SCAN_QOS = copy.copy(qos_profile_sensor_data)
 SCAN_QOS.depth = 1000
 POSE_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT,
                       durability=DurabilityPolicy.VOLATILE)
+ODOM_QOS = copy.copy(POSE_QOS)
+ODOM_QOS.depth = 1000
 POSE_QOS_OVERRIDES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
                       QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
 #: Poses kept to label scans that waited in the queue.
 POSE_HISTORY = 500
+#: Largest | |q|^2 - 1 | of an orientation taken as a rotation.
+UNIT_TOLERANCE = 0.01
+
+
+def pose_problem(pose):
+    """Return why a geometry_msgs/Pose has no finite x, y, yaw, or None."""
+    p, q = pose.position, pose.orientation
+    if not (math.isfinite(p.x) and math.isfinite(p.y)):
+        return f'x, y = {p.x}, {p.y} is not finite'
+    norm = q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w
+    if not abs(norm - 1) <= UNIT_TOLERANCE:
+        return (f'orientation x, y, z, w = {q.x:g}, {q.y:g}, {q.z:g}, '
+                f'{q.w:g} is not a unit quaternion')
+    return None
 
 
 class RecordFingerprintsNode(Node):
@@ -73,16 +101,31 @@ class RecordFingerprintsNode(Node):
         super().__init__('record_fingerprints')
         values = declare(self, PARAMETERS)
         output, pose_topic = values['output'], values['pose_topic']
+        odom_topic = values['odom_topic']
         if not output:
             raise RecordingError('parameter output (the CSV path) is not '
                                  'set')
-        self.log = FingerprintLog(Path(output).expanduser(),
-                                  positions=bool(pose_topic))
+        output = Path(output).expanduser()
+        self.log = FingerprintLog(output, positions=bool(pose_topic))
         self.counts = Counter(scans_received=0, scans_paused=0,
                               scans_unusable=0, scans_lost=0,
                               skipped_readings=0, write_errors=0)
-        self._failing = False
+        #: (log, what its rows are, its write-error count) of each file.
+        self._files = [(self.log, 'scans', 'write_errors')]
+        self._failing = set()
         self._gaps = PublisherGaps()
+        self._odometry = None
+        if odom_topic:
+            self._odometry = PoseLog(odometry_path(output))
+            self._files.append((self._odometry, 'odometry poses',
+                                'odometry_write_errors'))
+            self.counts.update(odometry_received=0, odometry_invalid=0,
+                               odometry_out_of_order=0,
+                               odometry_write_errors=0)
+            self._odom_sub = self.create_subscription(
+                Odometry, odom_topic, self._on_odometry, ODOM_QOS,
+                qos_overriding_options=QoSOverridingOptions(
+                    policy_kinds=POSE_QOS_OVERRIDES))
         self._poses = None
         self._frame = None
         if pose_topic:
@@ -105,24 +148,43 @@ class RecordFingerprintsNode(Node):
             f'recording to {self.log.path} ({sum(self.log.counts.values())} scans '
             f'already there, {len(self.log.ap_ids)} APs)' + (
                 f', positions from {self._pose_sub.topic_name}'
-                if pose_topic else ''))
+                if pose_topic else '') + (
+                f', odometry from {self._odom_sub.topic_name} to '
+                f'{self._odometry.path}' if odom_topic else ''))
+        if pose_topic and not self.log.yaw:
+            self.get_logger().warn(
+                f'{self.log.path} has no YAW column (an earlier recorder): '
+                f'its scans go on without the yaw, which fit_odometry '
+                f'needs; record to a new file for that')
 
     def _on_pose(self, msg):
         self.counts['poses_received'] += 1
-        point = msg.pose.pose.position
-        problem = frame_problem(msg.header.frame_id) or (
-            None if math.isfinite(point.x) and math.isfinite(point.y)
-            else f'x, y = {point.x}, {point.y} is not finite')
+        pose = msg.pose.pose
+        problem = frame_problem(msg.header.frame_id) or pose_problem(pose)
         if problem:
             self.counts['poses_rejected'] += 1
             self.get_logger().warn(f'pose ignored: {problem}',
                                    throttle_duration_sec=THROTTLE_S)
             return
         self._poses.append((stamp_time(msg.header.stamp, self.get_clock()),
-                            point.x, point.y, msg.header.frame_id))
+                            pose.position.x, pose.position.y,
+                            yaw_of(pose.orientation), msg.header.frame_id))
+
+    def _on_odometry(self, msg):
+        self.counts['odometry_received'] += 1
+        pose = msg.pose.pose
+        problem = pose_problem(pose)
+        refused = ('invalid', problem) if problem else self._odometry.add(
+            stamp_time(msg.header.stamp, self.get_clock()), pose.position.x,
+            pose.position.y, yaw_of(pose.orientation))
+        if refused:
+            kind, why = refused
+            self.counts[f'odometry_{kind}'] += 1
+            self.get_logger().warn(f'odometry pose skipped: {why}',
+                                   throttle_duration_sec=THROTTLE_S)
 
     def _position(self, stamp):
-        """Return (x, y, frame) of the pose nearest the scan, or None."""
+        """Return (x, y, yaw, frame) of the pose nearest the scan, or None."""
         t = stamp_time(stamp, self.get_clock())
         max_age = self.get_parameter('max_pose_age').value
         if self._poses:
@@ -163,7 +225,7 @@ class RecordFingerprintsNode(Node):
         recorded, skipped = self.log.add(msg.name, msg.position, building,
                                          floor, seconds(msg.header.stamp),
                                          position)
-        self._check_written()
+        self._check_written(*self._files[0])
         self.counts['skipped_readings'] += skipped
         if not recorded:
             self.counts['scans_unusable'] += 1
@@ -171,74 +233,86 @@ class RecordFingerprintsNode(Node):
                                    'not finite or implausible, or a bad AP '
                                    'name)', throttle_duration_sec=THROTTLE_S)
             return
-        if position is not None and position[2] != self._frame:
-            self.get_logger().info(f'positions in frame {position[2]}' + (
+        if position is not None and position[3] != self._frame:
+            self.get_logger().info(f'positions in frame {position[3]}' + (
                 f' (was {self._frame})' if self._frame else ''))
-            self._frame = position[2]
+            self._frame = position[3]
         n = self.log.counts[(building, floor)]
         if n % PROGRESS_EVERY == 0:
             self.get_logger().info(f'building {building}, floor {floor}: '
                                    f'{n} scans')
 
-    def _check_written(self):
-        """Log a write error (throttled), or that writing works again."""
-        log = self.log
+    def _check_written(self, log, what, errors):
+        """Log a write error of ``log`` (throttled), or that it works again."""
         if log.write_error is not None:
-            if not self._failing:
-                self.counts['write_errors'] += 1
-            self._failing = True
+            if log.path not in self._failing:
+                self.counts[errors] += 1
+            self._failing.add(log.path)
             self.get_logger().error(
                 f'cannot write {log.path}: {log.write_error}; '
-                f'{len(log.pending)} scans kept in memory, retrying every '
-                f'second and with each scan',
-                throttle_duration_sec=THROTTLE_S)
-        elif self._failing:
-            self._failing = False
+                f'{len(log.pending)} {what} kept in memory, retrying every '
+                f'second' + (' and with each scan' if log is self.log
+                             else ''), throttle_duration_sec=THROTTLE_S)
+        elif log.path in self._failing:
+            self._failing.discard(log.path)
             self.get_logger().info(f'writing {log.path} works again: the '
-                                   f'scans kept in memory are written')
+                                   f'{what} kept in memory are written')
 
     def _publish_progress(self):
-        if self.log.pending:
-            self.log.flush()
-            self._check_written()
+        for log, what, errors in self._files:
+            if log.pending:
+                log.flush()
+                self._check_written(log, what, errors)
         counts = sorted(self.log.counts.items())
         level, message = DiagnosticStatus.OK, ', '.join(
             f'B{b}F{f}: {n}' for (b, f), n in counts) or 'no scans yet'
-        if self.log.write_error is not None:
-            level = DiagnosticStatus.ERROR
-            message = (f'cannot write: {self.log.write_error}; '
-                       f'{len(self.log.pending)} scans kept in memory; '
-                       + message)
+        if self._odometry is not None:
+            message += f'; {self._odometry.written} odometry poses'
+        for log, what, _ in reversed(self._files):
+            if log.write_error is not None:
+                level = DiagnosticStatus.ERROR
+                name = '' if log is self.log else f' {log.path.name}'
+                message = (f'cannot write{name}: {log.write_error}; '
+                           f'{len(log.pending)} {what} kept in memory; '
+                           + message)
+        values = [KeyValue(key=f'scans/B{b}F{f}', value=str(n))
+                  for (b, f), n in counts] + [
+            KeyValue(key='aps', value=str(len(self.log.ap_ids))),
+            KeyValue(key='scans_waiting', value=str(len(self.log.pending)))]
+        if self._odometry is not None:
+            values += [KeyValue(key='odometry_written',
+                                value=str(self._odometry.written)),
+                       KeyValue(key='odometry_waiting',
+                                value=str(len(self._odometry.pending)))]
         out = DiagnosticArray()
         out.header.stamp = self.get_clock().now().to_msg()
         out.status = [DiagnosticStatus(
             level=level, name=f'{self.get_name()}: progress',
             message=message, hardware_id=str(self.log.path),
-            values=[KeyValue(key=f'scans/B{b}F{f}', value=str(n))
-                    for (b, f), n in counts] +
-            [KeyValue(key='aps', value=str(len(self.log.ap_ids))),
-             KeyValue(key='scans_waiting', value=str(len(self.log.pending)))] +
-            [KeyValue(key=k, value=str(n)) for k, n in self.counts.items()])]
+            values=values + [KeyValue(key=k, value=str(n))
+                             for k, n in self.counts.items()])]
         self.diag_pub.publish(out)
 
     def destroy_node(self):
         """Write what waits in memory (else to a fallback file), then stop."""
-        log = self.log
-        if log.pending and not log.flush():
-            n = len(log.pending)
-            for folder in (tempfile.gettempdir(), Path.home()):
-                try:
-                    path = log.save_pending(folder)
-                except OSError as exc:
-                    self.get_logger().error(f'cannot save to {folder}: {exc}')
-                    continue
-                self.get_logger().error(
-                    f'cannot write {log.path}: {log.write_error}; the {n} '
-                    f'scans not in it are saved in {path}')
-                break
-            else:
-                self.get_logger().fatal(f'{n} scans could not be saved')
+        for log, what, _ in self._files:
+            if log.pending and not log.flush():
+                self._save_pending(log, what)
         super().destroy_node()
+
+    def _save_pending(self, log, what):
+        n = len(log.pending)
+        for folder in (tempfile.gettempdir(), Path.home()):
+            try:
+                path = log.save_pending(folder)
+            except OSError as exc:
+                self.get_logger().error(f'cannot save to {folder}: {exc}')
+                continue
+            self.get_logger().error(
+                f'cannot write {log.path}: {log.write_error}; the {n} '
+                f'{what} not in it are saved in {path}')
+            return
+        self.get_logger().fatal(f'{n} {what} could not be saved')
 
 
 def main(args=None):

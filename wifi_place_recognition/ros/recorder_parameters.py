@@ -2,6 +2,7 @@
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
                                 ParameterDescriptor)
 from sensor_msgs.msg import JointState
@@ -11,12 +12,14 @@ Records a survey: appends every scan on wifi/scan to the fingerprint CSV
 `output` (created with its missing folders, or continued), labelled with
 the current `building` and `floor` parameters; change them as the robot
 moves (ros2 param set /record_fingerprints floor 2), -1 pauses. With
-`pose_topic`, each scan also gets the x, y of the nearest pose in time.
-train_model reads the file.
+`pose_topic`, each scan also gets the x, y, yaw of the nearest pose in
+time. With `odom_topic`, the odometry goes to a pose CSV beside it
+(walk1.csv -> walk1.odom.csv). train_model reads the scans; fit_odometry
+fits the odometry's drift on both.
 """
 
-#: (role, name, type, what) of every topic the node uses; {pose_topic} is
-#: the parameter's value (subscribed only when it is set).
+#: (role, name, type, what) of every topic the node uses; {pose_topic} and
+#: {odom_topic} are the parameters' values (subscribed only when set).
 TOPICS = (
     ('subscribes', 'wifi/scan', JointState,
      'scans (name = AP id, position = RSSI dBm); sensor-data QoS (best '
@@ -24,9 +27,12 @@ TOPICS = (
     ('subscribes', '{pose_topic}', PoseWithCovarianceStamped,
      'with pose_topic set: the robot\'s pose that labels each scan (best '
      'effort, volatile: matches AMCL\'s and sensor-data publishers)'),
+    ('subscribes', '{odom_topic}', Odometry,
+     'with odom_topic set: the robot\'s odometry, every pose recorded '
+     'beside the output (best effort, volatile, a deep queue)'),
     ('publishes', '/diagnostics', DiagnosticArray,
      'progress every second: scans per building/floor, skipped and lost '
-     'scans, write errors'),
+     'scans, odometry poses received, written and skipped, write errors'),
 )
 
 
@@ -46,8 +52,13 @@ PARAMETERS = (
     ('floor', -1, _label('floor label')),
     ('pose_topic', '', ParameterDescriptor(
         description='geometry_msgs/PoseWithCovarianceStamped topic whose '
-                    'x, y label each scan (e.g. /amcl_pose); empty: no '
-                    'positions', read_only=True)),
+                    'x, y, yaw label each scan (e.g. /amcl_pose); empty: '
+                    'no positions', read_only=True)),
+    ('odom_topic', '', ParameterDescriptor(
+        description='nav_msgs/Odometry topic whose every pose (TIMESTAMP, '
+                    'X, Y, YAW) is recorded to the CSV beside the output, '
+                    'named <output without .csv>.odom.csv (walk1.csv -> '
+                    'walk1.odom.csv); empty: no odometry', read_only=True)),
     ('max_pose_age', 2.0, ParameterDescriptor(
         description='s: the largest time between a scan and the pose that '
                     'labels it', floating_point_range=[FloatingPointRange(
