@@ -59,16 +59,17 @@ def _flat(text):
     return ' '.join(text.split())
 
 
-def _command(executable, option, folder):
+def _command(executable, option, folder, last):
     """
     Return (argv, env): ``executable`` with ``option`` in ``folder``.
 
-    After the option come the arguments that would start it for real
-    (scanning with tools that leave a mark, recording into ``out/``).
-    ROS_LOG_DIR shows whether rclpy.init ran: it creates a log file there.
+    Before (``last``) or after the option come the arguments that would
+    start it for real (scanning with tools that leave a mark, recording
+    into ``out/``). ROS_LOG_DIR shows whether rclpy.init ran: it creates a
+    log file there.
     """
     env = dict(os.environ, ROS_LOG_DIR=str(folder / 'ros_log'))
-    args = []
+    args = ['--ros-args', '-p', 'tracking:=true']
     if executable == 'wifi_scanner_node':
         tools = folder / 'bin'
         tools.mkdir()
@@ -80,14 +81,16 @@ def _command(executable, option, folder):
     elif executable == 'record_fingerprints':
         args = ['--ros-args', '-p', f'output:={folder / "out" / "rec.csv"}',
                 '-p', 'building:=0', '-p', 'floor:=0']
-    return [str(BIN / executable), option, *args], env
+    return [str(BIN / executable)] + (
+        [*args, option] if last else [option, *args]), env
 
 
+@pytest.mark.parametrize('last', [False, True], ids=['first', 'last'])
 @pytest.mark.parametrize('option', ['--help', '-h'])
 @pytest.mark.parametrize('executable', sorted(TABLES))
 def test_a_node_executable_prints_its_interface_and_starts_nothing(
-        tmp_path, executable, option):
-    argv, env = _command(executable, option, tmp_path)
+        tmp_path, executable, option, last):
+    argv, env = _command(executable, option, tmp_path, last)
     try:
         result = run(argv, env=env, cwd=tmp_path, timeout=60)
     except subprocess.TimeoutExpired:

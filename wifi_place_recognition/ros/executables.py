@@ -1,13 +1,14 @@
 """
 The nodes' executables, and the stop request that SIGINT/SIGTERM make.
 
-With ``-h`` or ``--help`` (outside ``--ros-args``) an executable prints its
-help from the node's interface table and exits 0, before anything of ROS
-starts (so ``ros2 run ... --help`` works). Otherwise it catches SIGINT and
-SIGTERM before it imports its node (rclpy and numpy take a few hundred
-milliseconds), so a signal at any moment of start-up, or a repeated one
-during shutdown, only requests the stop that :func:`.runner.run` carries
-out. This module imports nothing heavy for that reason.
+With ``-h`` or ``--help`` (anywhere among its arguments) an executable
+prints its help from the node's interface table and exits 0, before
+anything of ROS starts (so ``ros2 run ... --help`` works). Otherwise it
+catches SIGINT and SIGTERM before it imports its node (rclpy and numpy take
+a few hundred milliseconds), so a signal at any moment of start-up, or a
+repeated one during shutdown, only requests the stop that
+:func:`.runner.run` carries out. This module imports nothing heavy for that
+reason.
 """
 
 import importlib

@@ -23,16 +23,13 @@ def declare(node, parameters):
 
 
 def asks_for_help(argv):
-    """Return True if ``-h`` or ``--help`` is an argument outside --ros-args."""
-    ros = False
-    for arg in argv:
-        if arg == '--ros-args':
-            ros = True
-        elif arg == '--':
-            ros = False
-        elif not ros and arg in OPTIONS:
-            return True
-    return False
+    """
+    Return True if ``-h`` or ``--help`` is an argument.
+
+    Also inside ``--ros-args``, where rcl would refuse it as unknown: no ROS
+    argument is spelled so.
+    """
+    return any(arg in OPTIONS for arg in argv)
 
 
 def value_text(value):
