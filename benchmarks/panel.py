@@ -16,6 +16,13 @@ k (1-11) chosen by grouped 4-fold cross-validation on the training part
 building+floor and for position; a random forest (100 trees, -110 dBm)
 per seed. The test part is only ever evaluated.
 
+The table and JSON also give the probabilities' calibration on the test
+part: the model's temperature, the expected calibration error (10 bins of
+the top-class probability), the share of scans answered at the node's
+default ``min_confidence`` and their building+floor accuracy; the JSON
+holds each run's reliability table and whole risk-coverage curve
+(thresholds 0-1 by 0.01), which ``plots`` draws.
+
 ``cv``: the cross-validation of recipe variants alone (no test file):
 ``--variants '{"name": {TrainConfig overrides}}'``; prints the held-out
 building+floor and position per dataset, mean over seeds.
@@ -23,6 +30,7 @@ building+floor and position per dataset, mean over seeds.
     python benchmarks/panel.py run
     python benchmarks/panel.py run --datasets tut1,tut2 --seeds 0
     python benchmarks/panel.py cv --variants '{"b64": {"batch_size": 64}}'
+    python benchmarks/panel.py plots --json benchmarks/results/panel.json
 """
 
 import argparse
@@ -42,6 +50,7 @@ from wifi_place_recognition.core.locator import METRICS
 from wifi_place_recognition.core.preprocessing import signal, SIGNALS
 from wifi_place_recognition.data.fingerprints import (
     read_fingerprints, ReaderOptions)
+from wifi_place_recognition.ros.classifier_parameters import PARAMETERS
 from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.folds import grouped_folds
 
@@ -176,7 +185,25 @@ def _read(root, name, part):
 KEYS = ('building_floor_accuracy', 'building_accuracy', 'cv_building_floor',
         'position_mean_error_m', 'position_median_error_m',
         'cv_position_mean_error_m', 'position_in_95_ellipse', 'epochs',
-        'train_seconds', 'train_peak_mib')
+        'train_seconds', 'train_peak_mib', 'temperature', 'ece',
+        'answered_at_default', 'accuracy_at_default')
+#: The node's default min_confidence: its answers at or above it are OK
+#: (may change ~/current_place).
+MIN_CONFIDENCE = dict((name, default) for name, default, _ in
+                      PARAMETERS)['min_confidence']
+
+
+def _calibration_figures(result):
+    """Add the ECE and the risk-coverage point at the node's default."""
+    c = result.get('calibration')
+    if c is None:
+        return result
+    point = next(p for p in c['risk_coverage']
+                 if abs(p['threshold'] - MIN_CONFIDENCE) < 1e-9)
+    result.update(temperature=c['temperature'], ece=c['ece'],
+                  answered_at_default=point['coverage'],
+                  accuracy_at_default=point['accuracy'])
+    return result
 
 
 def run(args):
@@ -192,8 +219,9 @@ def run(args):
         with tempfile.TemporaryDirectory() as folder:
             for seed in args.seeds:
                 try:
-                    r = train_and_test(args.flags, seed, paths['train'],
-                                       paths['test'], data['args'], folder)
+                    r = _calibration_figures(train_and_test(
+                        args.flags, seed, paths['train'], paths['test'],
+                        data['args'], folder))
                 except RuntimeError as e:
                     r = {'refused': str(e).strip().splitlines()[-1]}
                 runs.setdefault('default', []).append(r)
@@ -279,8 +307,10 @@ def _print_dataset(name, result):
           f'{result["published_best"]}, published k-NN '
           f'{result["published_knn"]}')
     print('| method | test b+f | test building | CV b+f | position mean (m)'
-          ' | CV position (m) | in 95% circle | epochs | train s | peak MiB |')
-    print('|---|---|---|---|---|---|---|---|---|---|')
+          ' | CV position (m) | in 95% circle | temperature | ECE | '
+          f'answered at p >= {MIN_CONFIDENCE:g} | their b+f | epochs | '
+          'train s | peak MiB |')
+    print('|---' * 14 + '|')
     for method, row in result['table'].items():
         print(f'| {method} | {_cell(row["building_floor_accuracy"])} | '
               f'{_cell(row["building_accuracy"])} | '
@@ -288,6 +318,10 @@ def _print_dataset(name, result):
               f'{_cell(row["position_mean_error_m"], ".2f")} | '
               f'{_cell(row["cv_position_mean_error_m"], ".2f")} | '
               f'{_cell(row["position_in_95_ellipse"], ".3f")} | '
+              f'{_cell(row["temperature"], ".2f")} | '
+              f'{_cell(row["ece"])} | '
+              f'{_cell(row["answered_at_default"], ".3f")} | '
+              f'{_cell(row["accuracy_at_default"])} | '
               f'{_cell(row["epochs"], ".0f")} | '
               f'{_cell(row["train_seconds"], ".0f")} | '
               f'{_cell(row["train_peak_mib"], ".0f")} |')
@@ -302,8 +336,9 @@ def _best(table, prefix, key, pick):
 def _print_panel(results):
     print('\n| dataset | default b+f | published best | best k-NN b+f (CV) '
           '| forest b+f | default position (m) | best k-NN position (CV) '
-          '| in 95% circle | train s |')
-    print('|---|---|---|---|---|---|---|---|---|')
+          f'| in 95% circle | ECE | answered at p >= {MIN_CONFIDENCE:g} | '
+          'their b+f | train s |')
+    print('|---' * 12 + '|')
     for name, r in results.items():
         t, d = r['table'], r['table']['default']
         cells = [_best(t, 'k-NN class', 'building_floor_accuracy', max),
@@ -314,13 +349,64 @@ def _print_panel(results):
               f'{r["published_best"] or "-"} | {knn} | {rf} | '
               f'{_cell(d["position_mean_error_m"], ".2f")} | {knn_xy} | '
               f'{_cell(d["position_in_95_ellipse"], ".3f")} | '
+              f'{_cell(d["ece"])} | '
+              f'{_cell(d["answered_at_default"], ".3f")} | '
+              f'{_cell(d["accuracy_at_default"])} | '
               f'{_cell(d["train_seconds"], ".0f")} |')
+
+
+def plots(args):
+    """
+    Draw each dataset's reliability diagram and risk-coverage curve.
+
+    From a ``run`` JSON (``--json``): one PNG per dataset beside it,
+    ``<json stem>-reliability-<dataset>.png``, every seed of the default.
+    """
+    import matplotlib
+    matplotlib.use('Agg')
+    from matplotlib import pyplot
+    result = json.loads(args.json.read_text())
+    written = []
+    for name, r in result['datasets'].items():
+        runs = [run for run in r['runs']['default'] if 'calibration' in run]
+        if not runs or len(runs[0]['classes']) < 2:
+            continue
+        figure, (left, right) = pyplot.subplots(1, 2, figsize=(9, 4))
+        left.plot([0, 1], [0, 1], color='grey', lw=0.8)
+        for seed, run in zip(result['seeds'], runs):
+            c = run['calibration']
+            rows = c['reliability']
+            left.plot([b['confidence'] for b in rows],
+                      [b['accuracy'] for b in rows], 'o-', ms=3,
+                      label=f'seed {seed}: ECE {c["ece"]:.3f}, '
+                            f'T {c["temperature"]:.2f}')
+            curve = [p for p in c['risk_coverage'] if p['coverage'] > 0]
+            line, = right.plot([p['coverage'] for p in curve],
+                               [p['accuracy'] for p in curve], lw=1)
+            point = _calibration_figures(dict(run))
+            right.plot(point['answered_at_default'],
+                       point['accuracy_at_default'], 'o',
+                       color=line.get_color())
+        left.set(xlabel='confidence (top class, 10 bins)',
+                 ylabel='building+floor right', xlim=(0, 1), ylim=(0, 1),
+                 title=f'{name}: reliability')
+        left.legend(fontsize=7, loc='upper left')
+        right.set(xlabel='share of scans answered (confidence >= threshold)',
+                  ylabel='building+floor right among them',
+                  title=f'risk-coverage (dot: p >= {MIN_CONFIDENCE:g})')
+        figure.tight_layout()
+        out = args.json.with_name(
+            f'{args.json.stem}-reliability-{name}.png')
+        figure.savefig(out, dpi=90)
+        pyplot.close(figure)
+        written.append(str(out))
+    print('\n'.join(written))
 
 
 def main():
     """Run the benchmark; print tables; write JSON."""
     p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    p.add_argument('mode', choices=('run', 'cv'))
+    p.add_argument('mode', choices=('run', 'cv', 'plots'))
     p.add_argument('--root', type=Path,
                    default=ROOT.parent / 'shared' / 'datasets',
                    help='folder holding panel/, ujiindoorloc/, wifine/')
@@ -334,7 +420,12 @@ def main():
     p.add_argument('--no-knn', action='store_true',
                    help='run: skip the k-NN baselines')
     p.add_argument('--out', type=Path)
+    p.add_argument('--json', type=Path,
+                   default=ROOT / 'benchmarks' / 'results' / 'panel.json',
+                   help='plots: the run JSON to draw from')
     args = p.parse_args()
+    if args.mode == 'plots':
+        return plots(args)
     unknown = set(args.datasets) - set(DATASETS)
     if unknown:
         p.error(f'unknown datasets {sorted(unknown)}; known: {sorted(ALL)}')

@@ -8,7 +8,8 @@ import stat
 import numpy as np
 import pytest
 from wifi_place_recognition.core.artifact import (
-    load_model, ModelFileError, save_model)
+    _digest, load_model, ModelFileError, save_model)
+from wifi_place_recognition.core.model import ScanForward
 from fuzz import hostile_model_files
 from wifi_place_recognition.core.resources import default_model_path
 from wifi_place_recognition.training.config import TrainConfig
@@ -115,3 +116,49 @@ def test_failed_write_keeps_the_previous_file(synthetic, tmp_path,
         save_model(model, path)
     assert path.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == ['m.npz']
+
+
+def test_a_model_file_carries_its_temperature(synthetic, tmp_path):
+    model = load_model(synthetic[1])
+    x = np.full((4, len(model.ap_ids)), np.nan, np.float32)
+    x[:, :6] = [-55, -60, -70, -80, -65, -75]
+    x[1, :3] = np.nan
+    x[2, 6:9], x[3, :6] = -50, -90
+    model.temperature = 1.0
+    raw = model.predict_proba(x)
+    model.temperature = 3.0
+    save_model(model, tmp_path / 'hot.npz')
+    copy = load_model(tmp_path / 'hot.npz')
+    assert copy.temperature == 3.0
+    proba = copy.predict_proba(x)
+    expected = raw ** (1 / 3.0)
+    np.testing.assert_allclose(proba, expected / expected.sum(
+        axis=1, keepdims=True), rtol=1e-5)
+    assert (proba.argmax(axis=1) == raw.argmax(axis=1)).all()
+    assert (proba.max(axis=1) < raw.max(axis=1) - 1e-3).all()
+    forward = ScanForward(copy)
+    for row, p in zip(x, proba):
+        np.testing.assert_allclose(forward(*copy.sparse(row)), p, atol=1e-5)
+
+
+def test_a_schema_3_file_loads_uncalibrated(synthetic, tmp_path):
+    header, arrays = _header_and_arrays(synthetic[1])
+    header.pop('sha256')
+    header['schema_version'] = 3
+    del header['calibration']
+    header['sha256'] = _digest(header, {k: v for k, v in arrays.items()
+                                        if k != 'header'})
+    model = load_model(_write_npz(tmp_path / 'old.npz', header, arrays))
+    assert model.temperature == 1.0
+
+
+@pytest.mark.parametrize('value', [0, -1.0, 1e9, float('nan'), 'hot', None,
+                                   True])
+def test_a_bad_temperature_is_refused(synthetic, tmp_path, value):
+    header, arrays = _header_and_arrays(synthetic[1])
+    header.pop('sha256')
+    header['calibration']['temperature'] = value
+    header['sha256'] = _digest(header, {k: v for k, v in arrays.items()
+                                        if k != 'header'})
+    with pytest.raises(ModelFileError, match='calibration: temperature'):
+        load_model(_write_npz(tmp_path / 'bad.npz', header, arrays))

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from ros_helpers import Client, NodeProcess, running_node
 from fuzz import hostile_model_files
+from wifi_place_recognition.core.artifact import load_model, save_model
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.ros.messages import status_values
 
@@ -57,6 +58,31 @@ def test_answers_match_the_model_and_carry_the_contract(running, synthetic):
         np.testing.assert_allclose(probs, proba[0], atol=1e-6)
         assert status.message.startswith(
             f'building {building[0]}, floor {floor[0]} (p=')
+
+
+def test_the_node_applies_the_temperature_of_its_model_file(
+        ros, synthetic, tmp_path):
+    model = load_model(synthetic[1])
+    fp = read_fingerprints(synthetic[0])
+    rows = range(0, len(fp), 29)
+    raw = model.predict_proba(fp.rssi[list(rows)])
+    model.temperature = 4.0
+    save_model(model, tmp_path / 'calibrated.npz')
+    with running_node(ros, tmp_path, tmp_path / 'calibrated.npz',
+                      'classifier_calibrated', '-p', 'max_aps:=50', '-p',
+                      'tracking:=false') as (client, _, loaded):
+        for row, p in zip(rows, raw):
+            detected = np.flatnonzero(np.isfinite(fp.rssi[row]))
+            status = client.send([model.ap_ids[j] for j in detected],
+                                 list(fp.rssi[row, detected]))
+            values = status_values(status)
+            probs = np.array([float(values[f'prob/{n}'])
+                              for n in model.class_names])
+            expected = p ** (1 / 4.0) / (p ** (1 / 4.0)).sum()
+            np.testing.assert_allclose(probs, expected, atol=1e-5)
+            assert probs.max() < p.max() - 0.01
+            assert status.level == (DiagnosticStatus.OK if probs.max() >= 0.5
+                                    else DiagnosticStatus.WARN)
 
 
 def test_duplicate_ap_keeps_the_strongest_reading(running):

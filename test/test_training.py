@@ -18,7 +18,12 @@ from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.folds import grouped_folds
 from wifi_place_recognition.training.fitting import best_epoch
-from wifi_place_recognition.training.selection import cross_validate
+from wifi_place_recognition.core.evaluation import align
+from wifi_place_recognition.core.locator import calibrated_sigma, Locator
+from wifi_place_recognition.core.preprocessing import signal
+from wifi_place_recognition.training.selection import (
+    _covered, _cross_validate_position, _Split, COVERED_M, cross_validate,
+    fit_temperature)
 from wifi_place_recognition.training.trainer import train
 
 SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
@@ -212,6 +217,11 @@ def test_validation_data_chooses_epochs_and_sigma(tmp_path):
         best_epoch(selection['mean_curve']) + 1
     assert loaded.position is not None      # sigma from validation scans
     assert selection['position_mean_error_m'] < 5.0
+    # every scan of the validation data right: the probabilities are not
+    # sharpened (temperature 1)
+    calibration = loaded.provenance['calibration']
+    assert calibration['fitted_on'] == f'validation data {validation}'
+    assert loaded.temperature == calibration['temperature'] == 1.0
     # a class the training data lacks: exit 2 naming it, nothing written
     other = synthetic_csv(tmp_path / 'other.csv')
     result = run(python_module('cli.train_model', '--data', data,
@@ -335,3 +345,89 @@ def test_evaluate_model_reports_position_errors_and_draws(tmp_path):
     assert sorted(p.name for p in plots.iterdir()) == [
         'confusion.png', 'error_cdf.png', 'map_B0F0.png', 'map_B0F1.png']
     assert all(p.read_bytes()[:4] == b'\x89PNG' for p in plots.iterdir())
+
+
+def test_the_temperature_fit_finds_the_one_that_made_the_labels():
+    rng = np.random.default_rng(0)
+    logits = rng.normal(0, 3, (20000, 4))
+    for made in (1.5, 2.5, 6.0):
+        proba = mean_softmax([logits / made])
+        y = (proba.cumsum(axis=1) < rng.random((len(proba), 1))).sum(axis=1)
+        assert fit_temperature(logits, y) == pytest.approx(made, rel=0.05)
+    # scans more often right than their probabilities say: never sharpened
+    assert fit_temperature(logits, logits.argmax(axis=1)) == 1.0
+
+
+def test_validation_data_with_errors_fits_the_temperature(tmp_path):
+    data = surveyed_csv(tmp_path / 'a.csv')
+    validation = surveyed_csv(tmp_path / 'v.csv', scans_seed=2,
+                              scans_per_floor=60)
+    lines = validation.read_text().splitlines()
+    for i in range(1, len(lines), 6):     # a floor label wrong in 1 of 6
+        cells = lines[i].split(',')
+        cells[-3] = str(1 - int(cells[-3]))
+        lines[i] = ','.join(cells)
+    validation.write_text('\n'.join(lines) + '\n')
+    model = tmp_path / 'm.npz'
+    result = run(python_module('cli.train_model', '--data', data,
+                               '--validation', validation, '-o', model,
+                               *FAST))
+    assert result.returncode == 0, result.stderr
+    loaded = load_model(model)
+    # the ensemble's probabilities of the validation scans fit the
+    # temperature the file carries: the best of its neighbours there
+    calibration = loaded.provenance['calibration']
+    assert loaded.temperature == calibration['temperature'] > 1.0
+    assert calibration['nll_after'] < calibration['nll_before']
+    fp = read_fingerprints(validation)
+    y = class_index(fp.building, fp.floor)[1]
+    nll = []
+    for factor in (0.9, 1.0, 1.1):
+        loaded.temperature = calibration['temperature'] * factor
+        proba = loaded.predict_proba(align(loaded, fp))
+        nll.append(-np.log(proba[np.arange(len(fp)), y]).mean())
+    assert nll[1] == pytest.approx(calibration['nll_after'], rel=1e-4)
+    assert nll[1] < min(nll[0], nll[2])
+
+
+def test_without_validation_data_the_probabilities_stay_as_computed(
+        synthetic):
+    model = load_model(synthetic[1])
+    assert model.temperature == 1.0
+    assert model.provenance['calibration']['fitted_on'].startswith(
+        'nothing: without validation data')
+
+
+def test_the_sigma_is_calibrated_on_held_out_scans_the_kept_ones_cover(
+        tmp_path):
+    fp = read_fingerprints(surveyed_csv(tmp_path / 'a.csv',
+                                        scans_per_floor=800))
+    classes, y = class_index(fp.building, fp.floor)
+    x = fp.position[:, 0] - fp.position[:, 0].min()
+    keep = x < 20                           # the left half of each floor
+    held = ~keep
+    split = _Split(fp, y, keep, fp.rssi[held], y[held], fp.position[held])
+    gap = np.linalg.norm(fp.position[held][:, None] - fp.position[keep],
+                         axis=2)
+    gap[y[held][:, None] != y[keep]] = np.inf     # another floor's scan
+    covered = gap.min(axis=1) <= COVERED_M
+    assert 30 < covered.sum() < held.sum() - 30
+    np.testing.assert_array_equal(_covered(split), covered)
+    config = TrainConfig(neighbours=3, position_representation='positive',
+                         position_metric='euclidean', position_scope='floor')
+    chosen = _cross_validate_position([split], [split.held_y], len(classes),
+                                      config, log=lambda line: None)
+    assert chosen['sigma_calibration_scans'] == covered.sum()
+    locator = Locator.build(fp.rssi[keep], y[keep], fp.position[keep],
+                            len(classes), 3)
+    placed = [locator.positions(locator.distances(
+        np.flatnonzero(~np.isnan(r)), signal(r[~np.isnan(r)], 'positive'),
+        c), (3,), c) for r, c in zip(fp.rssi[held], y[held])]
+    error = np.linalg.norm(np.array([p[0][0] for p in placed])
+                           - fp.position[held], axis=1)
+    nearest = np.array([p[1] for p in placed])
+    np.testing.assert_allclose(chosen['sigma_m'], calibrated_sigma(
+        error[covered], nearest[covered], y[held][covered], len(classes)),
+        rtol=1e-6)
+    # the uncovered half of the held-out scans is placed much worse
+    assert error[~covered].mean() > 2 * error[covered].mean()

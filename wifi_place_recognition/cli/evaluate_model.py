@@ -5,8 +5,12 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from ..core.artifact import load_model
 from ..core.evaluation import evaluate
+from ..core.metrics import (expected_calibration_error, reliability,
+                            risk_coverage)
 from ..core.resources import default_model_path
 from ..data.predictions import write_predictions
 from .common import (add_data_arguments, add_download_arguments,
@@ -44,6 +48,7 @@ def main(argv=None):
     fp = read_data(args.data, data_options(args), 'data', role='test')
     result = evaluate(model, fp)
     predictions = result.pop('predictions')
+    result['calibration'] = calibration(fp, predictions, model)
     if args.predictions:
         write_predictions(args.predictions, fp, predictions)
     if args.plot:
@@ -52,7 +57,32 @@ def main(argv=None):
         print(json.dumps(result))
     else:
         print_report(result, model, fp.source)
+        c = result['calibration']
+        print(f'  probabilities            temperature {c["temperature"]:g}, '
+              f'expected calibration error {c["ece"]:.4f} (10 bins)')
     return 0
+
+
+#: Thresholds of the risk-coverage curve: 0, 0.01, ..., 1.
+THRESHOLDS = np.round(np.linspace(0.0, 1.0, 101), 2)
+
+
+def calibration(fp, predictions, model):
+    """
+    Return how well the confidences match the hit rate.
+
+    The expected calibration error and reliability table (10 bins of the
+    top-class probability) and the risk-coverage curve: per threshold, the
+    share of scans whose confidence reaches it and their building+floor
+    accuracy.
+    """
+    right = (predictions['building'] == fp.building) & \
+        (predictions['floor'] == fp.floor)
+    confidence = predictions['confidence']
+    return {'temperature': model.temperature,
+            'ece': expected_calibration_error(confidence, right),
+            'reliability': reliability(confidence, right),
+            'risk_coverage': risk_coverage(confidence, right, THRESHOLDS)}
 
 
 def _plot(args, model, fp, result, predictions):

@@ -25,8 +25,15 @@ from .tracking import TrackingParams
 FORMAT = 'wifi_place_recognition/model'
 #: 2: the locator's references as int8 blocks; 3: the locator's own signal
 #: representation, distance and reference groups (floor or building), and
-#: position-only (one-class) models.
-SCHEMA_VERSION = 3
+#: position-only (one-class) models; 4: the probabilities' calibration
+#: (temperature).
+SCHEMA_VERSION = 4
+#: Versions this one reads: a schema 3 file has no calibration section and
+#: gets :data:`UNCALIBRATED` (its probabilities as its networks give them).
+READABLE_SCHEMAS = (3, 4)
+UNCALIBRATED = 1.0
+#: Temperatures a file may hold.
+TEMPERATURE_RANGE = (0.01, 100.0)
 MAX_FILE_BYTES = 256 << 20
 MAX_UNPACKED_BYTES = 1 << 30
 #: The locator's arrays in the file (all float32: indices below 2**24 and
@@ -58,7 +65,8 @@ def save_model(model, path):
               'ap_ids': list(model.ap_ids),
               'classes': np.asarray(model.classes).tolist(),
               'preprocessing': model.scaler.params(), 'members': members,
-              'provenance': model.provenance}
+              'provenance': model.provenance,
+              'calibration': {'temperature': float(model.temperature)}}
     if model.tracking is not None:
         header['tracking'] = model.tracking.to_dict()
     if model.position is not None:
@@ -162,11 +170,12 @@ def _read(path):
         raise ModelFileError(f'header is not valid JSON ({exc})') from None
     if not isinstance(header, dict) or header.get('format') != FORMAT:
         raise ModelFileError('not a wifi_place_recognition model')
-    if header.get('schema_version') != SCHEMA_VERSION:
+    if header.get('schema_version') not in READABLE_SCHEMAS:
         raise ModelFileError(f'schema version {header.get("schema_version")!r}'
                              f' is not supported (this version reads '
-                             f'{SCHEMA_VERSION}): retrain the model with '
-                             f'this version\'s train_model')
+                             f'{" and ".join(map(str, READABLE_SCHEMAS))}): '
+                             f'retrain the model with this version\'s '
+                             f'train_model')
     expected = header.pop('sha256', None)
     if expected != _digest(header, arrays):
         raise ModelFileError('checksum mismatch: the file was modified or '
@@ -206,7 +215,20 @@ def _build(header, arrays):
                              'a position output')
     return PlaceModel(ap_ids, scaler, members, classes,
                       header.get('provenance', {}), _tracking(header),
-                      position)
+                      position, _temperature(header))
+
+
+def _temperature(header):
+    """Return the probabilities' temperature (schema 3: uncalibrated)."""
+    if header['schema_version'] == 3:
+        return UNCALIBRATED
+    t = header['calibration']['temperature']
+    low, high = TEMPERATURE_RANGE
+    if isinstance(t, bool) or not isinstance(t, (int, float)) or \
+            not low <= t <= high:
+        raise ModelFileError(f'calibration: temperature {t!r} is not a '
+                             f'number in [{low:g}, {high:g}]')
+    return float(t)
 
 
 def _tracking(header):

@@ -36,3 +36,46 @@ def confusion(classes, building, floor, pred_building, pred_floor):
         if ti is not None:
             matrix[ti, index[(int(p[0]), int(p[1]))]] += 1
     return matrix
+
+
+def reliability(confidence, right, bins=10):
+    """
+    Return the reliability table of top-class confidences.
+
+    One row per non-empty equal-width bin of ``confidence`` (0-1): its
+    bounds, scans, mean confidence and share ``right``.
+    """
+    confidence = np.asarray(confidence, np.float64)
+    right = np.asarray(right, bool)
+    index = np.minimum((confidence * bins).astype(np.int64), bins - 1)
+    return [{'low': b / bins, 'high': (b + 1) / bins,
+             'scans': int((index == b).sum()),
+             'confidence': float(confidence[index == b].mean()),
+             'accuracy': float(right[index == b].mean())}
+            for b in range(bins) if (index == b).any()]
+
+
+def expected_calibration_error(confidence, right, bins=10):
+    """Return the ECE: scan-weighted mean of abs(accuracy - confidence)."""
+    rows = reliability(confidence, right, bins)
+    return float(sum(r['scans'] * abs(r['accuracy'] - r['confidence'])
+                     for r in rows) / max(len(confidence), 1))
+
+
+def risk_coverage(confidence, right, thresholds):
+    """
+    Return, per threshold, the share of scans answered and their accuracy.
+
+    A scan is answered when its ``confidence`` is at least the threshold
+    (accuracy None when none is).
+    """
+    confidence = np.asarray(confidence, np.float64)
+    right = np.asarray(right, bool)
+    out = []
+    for t in thresholds:
+        answered = confidence >= t
+        out.append({'threshold': float(t),
+                    'coverage': float(answered.mean()),
+                    'accuracy': float(right[answered].mean())
+                    if answered.any() else None})
+    return out

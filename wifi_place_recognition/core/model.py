@@ -34,6 +34,21 @@ def mean_softmax(member_logits):
     return np.add.reduce(x, axis=0) / len(x)
 
 
+def tempered(proba, temperature):
+    """
+    Return class probabilities (last axis) sharpened or softened by T.
+
+    proba ** (1 / T), renormalised: the softmax of log(proba) / T. It
+    keeps every scan's order of classes (so its answer); T > 1 lowers the
+    top probability, T = 1 returns ``proba`` itself.
+    """
+    if temperature == 1.0:
+        return proba
+    p = np.power(proba / proba.max(axis=-1, keepdims=True),
+                 1.0 / temperature)
+    return p / p.sum(axis=-1, keepdims=True)
+
+
 @dataclass
 class Layer:
     """A dense layer ``activation(x @ weight.T + bias)`` (torch layout)."""
@@ -55,7 +70,9 @@ class PlaceModel:
     Scaler + networks of dense layers + softmax over (building, floor).
 
     ``members`` holds one or more networks (lists of :class:`Layer`); the
-    probabilities are the mean of their softmax outputs. A model of one
+    probabilities are the mean of their softmax outputs, tempered by
+    ``temperature`` (:func:`tempered`; fitted on the selection's held-out
+    scans, 1 in files without one). A model of one
     class has no network (``members`` empty): every scan is that class,
     with probability 1, and the model is there for its position output.
     """
@@ -67,6 +84,7 @@ class PlaceModel:
     provenance: dict = field(default_factory=dict)
     tracking: TrackingParams = None  # from the file, or None
     position: Locator = None      # None: a classifier only
+    temperature: float = 1.0      # of the probabilities (1: as computed)
     blank: np.ndarray = field(init=False, repr=False)
     first_t: np.ndarray = field(init=False, repr=False)
 
@@ -100,8 +118,9 @@ class PlaceModel:
         inputs = self._inputs(rssi)
         if not self.members:
             return np.ones((len(inputs), 1))
-        return mean_softmax([_run(inputs, layers)
-                             for layers in self.members])
+        return tempered(mean_softmax([_run(inputs, layers)
+                                      for layers in self.members]),
+                        self.temperature)
 
     def _inputs(self, rssi):
         rssi = np.asarray(rssi, dtype=np.float32)
@@ -167,8 +186,8 @@ class ScanForward:
     dozen of hundreds of APs) then costs a gather of those columns instead
     of the whole first matrix. The members of an ensemble share one
     architecture, so each layer runs for all of them in one batched
-    product. Same probabilities as :meth:`PlaceModel.predict_proba` up to
-    float32 rounding.
+    product. Same (tempered) probabilities as
+    :meth:`PlaceModel.predict_proba` up to float32 rounding.
     """
 
     def __init__(self, model):
@@ -207,4 +226,4 @@ class ScanForward:
         x = x.reshape(self.shape)
         for weight_t, bias, activation in self.rest:
             x = activation(np.matmul(x, weight_t) + bias)
-        return mean_softmax(x[:, 0, :])
+        return tempered(mean_softmax(x[:, 0, :]), self.model.temperature)

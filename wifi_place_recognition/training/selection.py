@@ -17,6 +17,8 @@ import torch
 
 from ..core.evaluation import align
 from ..core.locator import calibrated_sigma, Locator, METRICS
+from ..core.metrics import expected_calibration_error
+from ..core.model import tempered
 from ..core.preprocessing import signal, SIGNALS
 from .config import SCOPES
 from .fitting import best_epoch, config_scaler, training_epochs
@@ -79,17 +81,7 @@ def validate(fp, y, classes, validation, config, log=print):
     """
     rssi = align(fp, validation)
     usable = ~np.isnan(rssi).all(axis=1)
-    index = {(int(b), int(f)): i for i, (b, f) in enumerate(classes)}
-    held_y = np.array([index.get((int(b), int(f)), -1) for b, f in
-                       zip(validation.building, validation.floor)], np.int64)
-    if (held_y < 0).any():
-        b, f = (validation.building[held_y < 0][0],
-                validation.floor[held_y < 0][0])
-        raise ValueError(f'validation data {validation.source}: building '
-                         f'{b} floor {f} ({int((held_y < 0).sum())} scans) '
-                         f'is not in the training data (if --small-classes '
-                         f'drop left it out, leave it out of the '
-                         f'validation data too)')
+    held_y = validation_classes(validation, classes)
     if not usable.any():
         raise ValueError(f'validation data {validation.source}: no scan '
                          f'detects an AP of the training data')
@@ -110,6 +102,22 @@ def validate(fp, y, classes, validation, config, log=print):
                         log=log),
                 grouping='validation', note=validation.source, groups=1,
                 never_held_out=[])
+
+
+def validation_classes(validation, classes):
+    """Return each validation scan's class index; refuse an unknown class."""
+    index = {(int(b), int(f)): i for i, (b, f) in enumerate(classes)}
+    held_y = np.array([index.get((int(b), int(f)), -1) for b, f in
+                       zip(validation.building, validation.floor)], np.int64)
+    if (held_y < 0).any():
+        b, f = (validation.building[held_y < 0][0],
+                validation.floor[held_y < 0][0])
+        raise ValueError(f'validation data {validation.source}: building '
+                         f'{b} floor {f} ({int((held_y < 0).sum())} scans) '
+                         f'is not in the training data (if --small-classes '
+                         f'drop left it out, leave it out of the '
+                         f'validation data too)')
+    return held_y
 
 
 def _select(splits, n_classes, config, log):
@@ -178,7 +186,10 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
 
     Each held-out scan is placed among the kept scans of its predicted
     class in every candidate space; the space and k with the least mean
-    error win, and their errors calibrate the sigma of each class.
+    error win, and their errors calibrate the sigma of each class: of
+    the held-out scans within :data:`COVERED_M` of a kept scan of their
+    class (a fold also holds out stretches no kept scan covers, which
+    made the circle too wide where the robot is, inside the survey).
     """
     ks = (config.neighbours,) if config.neighbours else NEIGHBOURS
     spaces = _spaces(config)
@@ -207,17 +218,45 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
     rep, metric, scope, k = best
     error = np.concatenate(errors[best])
     placed = np.isfinite(error)
+    calibrating = placed & np.concatenate([_covered(s) for s in splits])
+    if calibrating.sum() < MIN_COVERED:
+        calibrating = placed
     log(f'position: {metric} distance over the {rep} signal among the '
         f'{scope}\'s references, k={k}, held-out mean error '
-        f'{mean[best]:.2f} m')
+        f'{mean[best]:.2f} m; sigma from {int(calibrating.sum())} of '
+        f'{int(placed.sum())} held-out scans')
     return {'neighbours': k, 'position_representation': rep,
             'position_metric': metric, 'position_scope': scope,
             'position_mean_error_m': mean[best],
             'position_median_error_m': float(np.median(error[placed])),
+            'sigma_calibration_scans': int(calibrating.sum()),
             'sigma_m': calibrated_sigma(
-                error[placed],
-                np.concatenate(nearest[rep, metric, scope])[placed],
-                np.concatenate(predicted)[placed], n_classes).tolist()}
+                error[calibrating],
+                np.concatenate(nearest[rep, metric, scope])[calibrating],
+                np.concatenate(predicted)[calibrating], n_classes).tolist()}
+
+
+#: The sigma is calibrated on held-out scans taken within this many metres
+#: of a kept scan of their building/floor (the surveyed area, where a
+#: robot is placed); unless fewer than MIN_COVERED are.
+COVERED_M = 3.0
+MIN_COVERED = 30
+
+
+def _covered(split):
+    """Return which held-out scans lie within COVERED_M of a kept one."""
+    covered = np.zeros(len(split.held_y), bool)
+    kept = split.fp.position[split.keep]
+    for c in np.unique(split.held_y):
+        mine = np.flatnonzero(split.held_y == c)
+        refs = kept[split.y == c]
+        step = max(1, (1 << 20) // max(len(refs), 1))   # 1 M pairs a step
+        for start in range(0, len(mine) if len(refs) else 0, step):
+            rows = mine[start:start + step]
+            gap = np.linalg.norm(split.held_position[rows, None] - refs[None],
+                                 axis=2)
+            covered[rows] = gap.min(axis=1) <= COVERED_M
+    return covered
 
 
 def _groups(fp, y, n_classes, scope):
@@ -248,3 +287,68 @@ def reference_locator(fp, y, n_classes, selection):
                          selection['position_metric'],
                          _groups(fp, y, n_classes,
                                  selection['position_scope']))
+
+
+#: The temperatures :func:`fit_temperature` chooses from (bounds): it
+#: never sharpens (a set of held-out scans all right would ask for 0).
+TEMPERATURES = (1.0, 20.0)
+
+
+def fit_temperature(log_proba, y):
+    """
+    Return the temperature T that best fits held-out scans.
+
+    ``log_proba`` (n, k): log class probabilities of held-out scans of
+    classes ``y``; T minimises the mean negative log-likelihood of
+    softmax(log_proba / T) (convex in 1 / T: found by bisection of its
+    slope), within :data:`TEMPERATURES`.
+    """
+    log_proba = np.asarray(log_proba, np.float64)
+    own = log_proba[np.arange(len(y)), y]
+
+    def rising(beta):       # the NLL grows with beta = 1 / T here
+        z = beta * log_proba
+        p = np.exp(z - z.max(axis=1, keepdims=True))
+        p /= p.sum(axis=1, keepdims=True)
+        return ((p * log_proba).sum(axis=1) - own).mean() > 0
+
+    low, high = 1 / TEMPERATURES[1], 1 / TEMPERATURES[0]
+    if not rising(high):
+        return TEMPERATURES[0]
+    if rising(low):
+        return TEMPERATURES[1]
+    for _ in range(60):
+        beta = np.sqrt(low * high)
+        if rising(beta):
+            high = beta
+        else:
+            low = beta
+    return float(1 / np.sqrt(low * high))
+
+
+def calibrate(model, validation):
+    """
+    Return the temperature of ``model``'s probabilities, fitted on data.
+
+    The model's own probabilities of the ``validation`` scans (those
+    detecting an AP of the model; the whole ensemble, as deployed) fit a
+    temperature on top of the model's (temperatures multiply); the
+    summary also gives their negative log-likelihood and expected
+    calibration error before and after.
+    """
+    rssi = align(model, validation)
+    usable = ~np.isnan(rssi).all(axis=1)
+    y = validation_classes(validation, model.classes)[usable]
+    proba = model.predict_proba(rssi[usable])
+    log_proba = np.log(np.maximum(proba, np.finfo(np.float64).tiny))
+    temperature = fit_temperature(log_proba, y)
+    summary = {'temperature': model.temperature * temperature, 'fitted_on':
+               f'validation data {validation.source}',
+               'scans': int(usable.sum())}
+    for name, t in (('before', 1.0), ('after', temperature)):
+        p = tempered(proba, t)
+        summary[f'nll_{name}'] = float(-np.log(np.maximum(
+            p[np.arange(len(y)), y], np.finfo(np.float64).tiny)).mean())
+        summary[f'ece_{name}'] = expected_calibration_error(
+            p.max(axis=1), p.argmax(axis=1) == y)
+    return summary

@@ -17,7 +17,13 @@ from ..core.metrics import class_index
 from ..core.model import PlaceModel
 from ..data.fingerprints import check_trainable
 from .fitting import config_scaler, fit_network
-from .selection import cross_validate, reference_locator, validate
+from .selection import calibrate, cross_validate, reference_locator, validate
+
+#: Why a model trained without validation data keeps temperature 1.
+NOT_FITTED = ('nothing: without validation data the probabilities are the '
+              'ensemble\'s own (a temperature fitted on the folds\' '
+              'held-out scans, single networks on stretches no kept scan '
+              'covers, over-softened them on every dataset measured)')
 
 
 @dataclass
@@ -35,8 +41,9 @@ def train(fp, config, log=print, validation=None):
     """
     Train on :class:`Fingerprints`; return (PlaceModel, nets, report).
 
-    The epoch count (and the position's k-NN and sigma) is chosen on
-    ``validation`` (Fingerprints) when given, else by grouped
+    The epoch count (and the position's k-NN and sigma, and the
+    probabilities' temperature) is chosen on ``validation``
+    (Fingerprints) when given, else (no temperature) by grouped
     cross-validation with ``config.folds``, else ``config.epochs`` is
     used; then ``config.ensemble`` networks (seeds ``seed``, ``seed + 1``
     …) are trained on all scans of ``fp``. Data of one building/floor
@@ -109,4 +116,12 @@ def train(fp, config, log=print, validation=None):
     model = PlaceModel(fp.ap_ids, scaler,
                        [net.frozen_layers() for net in nets], classes,
                        provenance, position=position)
+    provenance['calibration'] = {'temperature': 1.0, 'fitted_on': NOT_FITTED}
+    if validation is not None and nets:
+        provenance['calibration'] = calibrate(model, validation)
+        model.temperature = provenance['calibration']['temperature']
+        c = provenance['calibration']
+        log(f'probabilities: temperature {c["temperature"]:.3f} fitted on '
+            f'{c["scans"]} validation scans (expected calibration error '
+            f'{c["ece_before"]:.4f} -> {c["ece_after"]:.4f})')
     return model, nets, report
