@@ -63,11 +63,11 @@ def _set_pose(pose, x, y, yaw, q=None):
                                math.cos(yaw / 2))
 
 
-def amcl_pose(t, x, y, yaw):
-    """Return the localiser's pose at ``t``."""
+def amcl_pose(t, x, y, yaw, q=None):
+    """Return the localiser's pose at ``t`` (``q``: its quaternion)."""
     msg = _stamped(PoseWithCovarianceStamped(), t)
     msg.header.frame_id = 'map'
-    _set_pose(msg.pose.pose, x, y, yaw)
+    _set_pose(msg.pose.pose, x, y, yaw, q)
     return msg
 
 
@@ -116,8 +116,10 @@ def test_a_survey_with_odometry_is_what_fit_odometry_reads(ros, tmp_path):
         assert wait_until(lambda: all(p.get_subscription_count() for p in
                                       (scans, poses, odom)) and
                           progress.values, 60, ros), recorder.stop()[1]
-        publish(poses, [amcl_pose(*row) for row in at_scans],
-                'poses_received', len(at_scans))
+        # One more pose, at the first scan, with no rotation: rejected.
+        publish(poses, [amcl_pose(*row) for row in at_scans] + [amcl_pose(
+            T0, 5.0, 5.0, 0.0, q=(0.0, 0.0, 0.0, 0.0))],
+            'poses_received', len(at_scans) + 1)
         publish(odom, [odometry(*row) for row in odo], 'odometry_received',
                 len(odo))
         t = odo[-1, 0]
@@ -148,9 +150,11 @@ def test_a_survey_with_odometry_is_what_fit_odometry_reads(ros, tmp_path):
             'odometry_written': len(odo) + 1, 'odometry_invalid': 2,
             'odometry_out_of_order': 1, 'odometry_waiting': 0,
             'odometry_write_errors': 0, 'scans_no_fresh_pose': 0,
-            'poses_rejected': 0}, values
+            'poses_rejected': 1}, values
     assert f'odometry from /odom to {tmp_path / "walk1.odom.csv"}' in log
     assert 'odometry pose skipped: x, y = nan, 0.0 is not finite' in log, log
+    assert 'pose ignored: orientation x, y, z, w = 0, 0, 0, 0 is not a unit ' \
+        'quaternion' in log, log
     # The scans: X, Y and the yaw of each scan's pose, wrapped to [-pi, pi].
     assert output.read_text().startswith(
         'BUILDINGID,FLOOR,TIMESTAMP,X,Y,YAW,FRAME,')
