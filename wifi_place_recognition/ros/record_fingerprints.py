@@ -73,8 +73,8 @@ POSE_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT,
                       durability=DurabilityPolicy.VOLATILE)
 ODOM_QOS = copy.copy(POSE_QOS)
 ODOM_QOS.depth = 1000
-POSE_QOS_OVERRIDES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
-                      QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
+QOS_OVERRIDES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
+                 QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
 #: Poses kept to label scans that waited in the queue.
 POSE_HISTORY = 500
 #: Largest | |q|^2 - 1 | of an orientation taken as a rotation.
@@ -94,7 +94,7 @@ def pose_problem(pose):
 
 
 class RecordFingerprintsNode(Node):
-    """Append labelled scans to a fingerprint CSV."""
+    """Append labelled scans to a fingerprint CSV, odometry beside it."""
 
     @names_the_node
     def __init__(self):
@@ -125,7 +125,7 @@ class RecordFingerprintsNode(Node):
             self._odom_sub = self.create_subscription(
                 Odometry, odom_topic, self._on_odometry, ODOM_QOS,
                 qos_overriding_options=QoSOverridingOptions(
-                    policy_kinds=POSE_QOS_OVERRIDES))
+                    policy_kinds=QOS_OVERRIDES))
         self._poses = None
         self._frame = None
         if pose_topic:
@@ -137,7 +137,7 @@ class RecordFingerprintsNode(Node):
             self._pose_sub = self.create_subscription(
                 PoseWithCovarianceStamped, pose_topic, self._on_pose,
                 POSE_QOS, qos_overriding_options=QoSOverridingOptions(
-                    policy_kinds=POSE_QOS_OVERRIDES))
+                    policy_kinds=QOS_OVERRIDES))
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
         self._scan_sub = self.create_subscription(
