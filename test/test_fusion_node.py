@@ -251,6 +251,10 @@ def test_odometry_faults_are_counted_and_never_followed(
         drive.drive(truth[:n], odometry[:n])
         t, last = truth[n - 1, 0], odometry[n - 1]
         drive.send_odometry([t + 0.1, math.nan, 0.0, 0.0])   # NaN
+        zero = odometry_message([t + 0.15, *last[1:]])
+        zero.pose.pose.orientation.z = 0.0                  # no rotation
+        zero.pose.pose.orientation.w = 0.0
+        drive.odom.publish(zero)
         drive.send_odometry([t - 5.0, *last[1:]])            # backwards
         drive.send_odometry([t + 0.2, 0.0, 0.0, 0.0])        # reset to zero
         drive.send_odometry([t + 0.3, 500.0, 0.0, 0.0])      # a jump
@@ -261,7 +265,7 @@ def test_odometry_faults_are_counted_and_never_followed(
         assert wait_until(lambda: int(health(client)[
             'odometry_jump']) >= 2, 10, ros), health(client)
         values = health(client)
-        assert int(values['odometry_invalid']) == 1
+        assert int(values['odometry_invalid']) == 2
         assert int(values['odometry_out_of_order']) == 1
         # odometry stops, the scans go on: WiFi alone, WARN
         for k in range(3):
@@ -271,3 +275,25 @@ def test_odometry_faults_are_counted_and_never_followed(
         status = client.health[-1]
         assert status.level == b'\x01' and 'odometry' in status.message
         assert proc.proc.poll() is None
+
+
+def test_fusion_switched_on_while_running_gives_poses_between_scans(
+        ros, tmp_path, surveyed_model):
+    with running_node(ros, tmp_path, surveyed_model, 'switch_node', '-p',
+                      'fusion:=false') as (client, proc, _):
+        drive = Drive(ros, client, 'switch_node')
+        truth = square(laps=0.25)
+        odometry = odometry_of(truth)
+        n = len(truth) // 2
+        results = drive.drive(truth[:n], odometry[:n])
+        assert results[-1][2].pose.covariance[35] == 1e6   # no yaw: off
+        assert health(client)['fusion'] == 'off'
+        assert client.set_param('fusion', True).successful
+        results = drive.drive(truth[n:], odometry[n:])
+        assert results[-1][2].pose.covariance[35] < 1e6    # fused
+        # odometry alone moves the pose on: the between-scan timer runs
+        ahead = odometry[-1] + [0.5, 0.5, 0.0, 0.0]
+        drive.send_odometry(ahead)
+        assert wait_until(lambda: drive.key(odometry_message(
+            ahead).header.stamp) in drive.poses, 10, ros), \
+            'no pose between scans'

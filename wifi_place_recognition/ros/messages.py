@@ -56,6 +56,22 @@ def pose_message(xy, cov, stamp, frame_id, yaw=None):
     return pose
 
 
+#: Largest | |q|^2 - 1 | of an orientation taken as a rotation.
+UNIT_TOLERANCE = 0.01
+
+
+def pose_problem(pose):
+    """Return why a geometry_msgs/Pose has no finite x, y, yaw, or None."""
+    p, q = pose.position, pose.orientation
+    if not (math.isfinite(p.x) and math.isfinite(p.y)):
+        return f'x, y = {p.x}, {p.y} is not finite'
+    norm = q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w
+    if not abs(norm - 1) <= UNIT_TOLERANCE:
+        return (f'orientation x, y, z, w = {q.x:g}, {q.y:g}, {q.z:g}, '
+                f'{q.w:g} is not a unit quaternion')
+    return None
+
+
 def yaw_of(orientation):
     """Return the yaw (rad) of a quaternion (rotation about z)."""
     q = orientation

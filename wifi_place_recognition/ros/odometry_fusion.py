@@ -13,13 +13,14 @@ the health status is WARN while odometry is faulty or stale.
 """
 
 import copy
+import math
 import time
 
 from nav_msgs.msg import Odometry
 from rclpy.qos import qos_profile_sensor_data
 
 from ..core.fusion import Fusion, FusionLimits, ODOMETRY_FAULTS
-from .messages import stamp_time, yaw_of
+from .messages import pose_problem, stamp_time, yaw_of
 
 ODOM_QOS = copy.copy(qos_profile_sensor_data)
 ODOM_QOS.depth = 100
@@ -64,6 +65,8 @@ class OdometryFusion:
             self.pose_rate = pose_rate
             self._timer = self._node.create_timer(
                 1.0 / pose_rate if pose_rate else 0.1, self._on_timer)
+            if not self.enabled:    # fusion off: no wake-ups
+                self._timer.cancel()
 
     @property
     def active(self):
@@ -75,6 +78,10 @@ class OdometryFusion:
         if not enabled:
             self.reset()
         self.enabled = enabled
+        if enabled:
+            self._timer.reset()
+        else:       # no wake-ups while off
+            self._timer.cancel()
 
     def reset(self):
         """Forget the filter and odometry: the next scan starts afresh."""
@@ -96,16 +103,18 @@ class OdometryFusion:
             return
         pose = msg.pose.pose
         seconds = stamp_time(msg.header.stamp, self._node.get_clock())
-        fault, fused = self.fusion.odometry(
-            seconds, pose.position.x, pose.position.y,
-            yaw_of(pose.orientation))
+        problem = pose_problem(pose)    # e.g. a zero quaternion: no yaw
+        yaw = math.nan if problem else yaw_of(pose.orientation)
+        fault, fused = self.fusion.odometry(seconds, pose.position.x,
+                                            pose.position.y, yaw)
         if not fault:
             self._odometry_stamp = (seconds, msg.header.stamp)
-        if fault:
+        else:
+            where = problem or (f'x {pose.position.x:g}, y '
+                                f'{pose.position.y:g}')
             self._problem(f'{fault.replace("_", " ")}: odometry message '
                           f'skipped (stamp {msg.header.stamp.sec}.'
-                          f'{msg.header.stamp.nanosec:09d}, x '
-                          f'{pose.position.x:g}, y {pose.position.y:g})')
+                          f'{msg.header.stamp.nanosec:09d}: {where})')
         self._emit(fused)
 
     def _on_timer(self):

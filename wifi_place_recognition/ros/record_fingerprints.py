@@ -43,7 +43,6 @@ The odometry subscription is the same, with a deeper queue.
 
 from collections import Counter, deque
 import copy
-import math
 from pathlib import Path
 import sys
 import tempfile
@@ -57,7 +56,7 @@ from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data,
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
-from .messages import seconds, stamp_time, yaw_of
+from .messages import pose_problem, seconds, stamp_time, yaw_of
 from .node_interface import declare
 from .recorder_parameters import PARAMETERS
 from .runner import names_the_node, run
@@ -77,20 +76,6 @@ QOS_OVERRIDES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
                  QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
 #: Poses kept to label scans that waited in the queue.
 POSE_HISTORY = 500
-#: Largest | |q|^2 - 1 | of an orientation taken as a rotation.
-UNIT_TOLERANCE = 0.01
-
-
-def pose_problem(pose):
-    """Return why a geometry_msgs/Pose has no finite x, y, yaw, or None."""
-    p, q = pose.position, pose.orientation
-    if not (math.isfinite(p.x) and math.isfinite(p.y)):
-        return f'x, y = {p.x}, {p.y} is not finite'
-    norm = q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w
-    if not abs(norm - 1) <= UNIT_TOLERANCE:
-        return (f'orientation x, y, z, w = {q.x:g}, {q.y:g}, {q.z:g}, '
-                f'{q.w:g} is not a unit quaternion')
-    return None
 
 
 class RecordFingerprintsNode(Node):
