@@ -2,7 +2,8 @@
 Panel benchmark: the default on every dataset, baselines, published figures.
 
 ``run`` (the judge of every default): for each dataset of the panel
-(TUT1, TUT2, TUT5, TUT6, TUT7, DSI1, UJIIndoorLoc, WiFine) and each seed,
+(TUT1, TUT2, TUT5, TUT6, TUT7, DSI1, UJIIndoorLoc, WiFine, and the robot
+runs: one run of a site to train, another to test) and each seed,
 the default is trained by the documented command (``train_model`` with no
 option beyond the dataset's format flags, in a subprocess whose wall time
 and peak memory are measured) on the training part and scored by
@@ -21,7 +22,10 @@ part: the model's temperature, the expected calibration error (10 bins of
 the top-class probability), the share of scans answered at the node's
 default ``min_confidence`` and their building+floor accuracy; the JSON
 holds each run's reliability table and whole risk-coverage curve
-(thresholds 0-1 by 0.01), which ``plots`` draws.
+(thresholds 0-1 by 0.01), which ``plots`` draws, a row per dataset
+(``results/panel-reliability.png`` from ``panel.json``,
+``results/panel-large-reliability.png`` from ``panel-large.json``). The
+robot runs' figures are in ``results/panel-robot.json``.
 
 ``cv``: the cross-validation of recipe variants alone (no test file):
 ``--variants '{"name": {TrainConfig overrides}}'``; prints the held-out
@@ -58,7 +62,17 @@ from datasets import DATASETS, PANEL, PUBLISHED
 from runs import summary, train_and_test
 
 ROOT = Path(__file__).resolve().parent.parent
-ALL = PANEL + ('ujiindoorloc', 'wifine')
+#: Robot runs (one floor each: position-only models, judged on the 95 %
+#: circle): trained on one run of a site, tested on another.
+ROBOT = {'b14-1-2': ('b14', 1, 2), 'b14-2-3': ('b14', 2, 3),
+         'b14-3-1': ('b14', 3, 1), 'b24-2-3': ('b24', 2, 3),
+         'b24-3-2': ('b24', 3, 2)}
+for _name, (_site, _train, _test) in ROBOT.items():
+    DATASETS[_name] = dict(
+        train=[f'robot/{_site}/{_site}test{_train}/scans.csv'],
+        test=[f'robot/{_site}/{_site}test{_test}/scans.csv'], options={},
+        args=[])
+ALL = PANEL + ('ujiindoorloc', 'wifine') + tuple(ROBOT)
 KS = (1, 3, 5, 7, 9, 11)
 
 
@@ -359,21 +373,22 @@ def plots(args):
     """
     Draw each dataset's reliability diagram and risk-coverage curve.
 
-    From a ``run`` JSON (``--json``): one PNG per dataset beside it,
-    ``<json stem>-reliability-<dataset>.png``, every seed of the default.
+    From a ``run`` JSON (``--json``): one PNG beside it,
+    ``<json stem>-reliability.png``, a row per dataset of several classes
+    (every seed of the default).
     """
     import matplotlib
     matplotlib.use('Agg')
     from matplotlib import pyplot
     result = json.loads(args.json.read_text())
-    written = []
-    for name, r in result['datasets'].items():
-        runs = [run for run in r['runs']['default'] if 'calibration' in run]
-        if not runs or len(runs[0]['classes']) < 2:
-            continue
-        figure, (left, right) = pyplot.subplots(1, 2, figsize=(9, 4))
+    names = [name for name, r in result['datasets'].items()
+             if len(r['runs']['default'][0].get('classes', ())) > 1]
+    figure, axes = pyplot.subplots(len(names), 2, squeeze=False,
+                                   figsize=(9, 3.3 * len(names)))
+    for name, (left, right) in zip(names, axes):
         left.plot([0, 1], [0, 1], color='grey', lw=0.8)
-        for seed, run in zip(result['seeds'], runs):
+        for seed, run in zip(result['seeds'],
+                             result['datasets'][name]['runs']['default']):
             c = run['calibration']
             rows = c['reliability']
             left.plot([b['confidence'] for b in rows],
@@ -391,16 +406,14 @@ def plots(args):
                  ylabel='building+floor right', xlim=(0, 1), ylim=(0, 1),
                  title=f'{name}: reliability')
         left.legend(fontsize=7, loc='upper left')
-        right.set(xlabel='share of scans answered (confidence >= threshold)',
+        right.set(xlabel='share of scans answered (confidence >= t)',
                   ylabel='building+floor right among them',
-                  title=f'risk-coverage (dot: p >= {MIN_CONFIDENCE:g})')
-        figure.tight_layout()
-        out = args.json.with_name(
-            f'{args.json.stem}-reliability-{name}.png')
-        figure.savefig(out, dpi=90)
-        pyplot.close(figure)
-        written.append(str(out))
-    print('\n'.join(written))
+                  title=f'{name}: risk-coverage (dot: t = '
+                        f'{MIN_CONFIDENCE:g})')
+    figure.tight_layout()
+    out = args.json.with_name(f'{args.json.stem}-reliability.png')
+    figure.savefig(out, dpi=80)
+    print(f'wrote {out}')
 
 
 def main():
@@ -409,7 +422,7 @@ def main():
     p.add_argument('mode', choices=('run', 'cv', 'plots'))
     p.add_argument('--root', type=Path,
                    default=ROOT.parent / 'shared' / 'datasets',
-                   help='folder holding panel/, ujiindoorloc/, wifine/')
+                   help='folder holding panel/, ujiindoorloc/, wifine/, robot/')
     p.add_argument('--datasets', type=lambda s: s.split(','),
                    default=list(ALL))
     p.add_argument('--seeds', type=lambda s: [int(v) for v in s.split(',')],

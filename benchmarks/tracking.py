@@ -5,9 +5,11 @@ Each test walk is replayed in time order with a model's tracking
 parameters. Reported, tracked against single-scan answers: building+floor
 accuracy (overall and per walk), wrong switches (per hour and per 100
 scans), the delay to follow a real change of class (scans, seconds), the
-position error. With ``--fit-walks`` the parameters are first chosen on those walks
-by the product command ``fit_tracking`` (on a copy of the model). Table on
-stdout, JSON in ``benchmarks/results/tracking-NAME.json``.
+position error, the expected calibration error and the risk-coverage
+curve of the answers' confidences (the point at 0.5, the node's default
+``min_confidence``). With ``--fit-walks`` the parameters are first chosen
+on those walks by the product command ``fit_tracking`` (on a copy of the
+model). Table on stdout, JSON in ``benchmarks/results/tracking-NAME.json``.
 
     python benchmarks/tracking.py --model M.npz --data TEST \
         [--fit-walks VAL] --name NAME [reading options]
@@ -23,10 +25,13 @@ import tempfile
 
 import numpy as np
 from wifi_place_recognition.cli import fit_tracking
+from wifi_place_recognition.cli.evaluate_model import THRESHOLDS
 from wifi_place_recognition.cli.common import (
     add_data_arguments, add_download_arguments, data_options, read_data)
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
+from wifi_place_recognition.core.metrics import (expected_calibration_error,
+                                                 risk_coverage)
 from wifi_place_recognition.core.tracking import (
     DEFAULT_TIMEOUT, PlaceTracker, track_walk, TrackingParams)
 from wifi_place_recognition.core.tracking_fit import walk_evidence
@@ -87,6 +92,15 @@ def _summary(rows):
                 float(np.nanmedian(d)) if np.isfinite(d).any() else None
         out[f'{who}_changes_not_followed'] = int(
             np.isnan(np.array(delays[f'{who}_delay_scans'], float)).sum())
+        confidence = np.concatenate([r[f'{who}_confidence'] for r in rows])
+        hits = np.concatenate([r[f'{who}_hits'] for r in rows])
+        out[f'{who}_ece'] = expected_calibration_error(confidence, hits)
+        out[f'{who}_risk_coverage'] = risk_coverage(confidence, hits,
+                                                    THRESHOLDS)
+        point = next(p for p in out[f'{who}_risk_coverage']
+                     if p['threshold'] == 0.5)
+        out[f'{who}_answered_at_0.5'] = point['coverage']
+        out[f'{who}_accuracy_at_0.5'] = point['accuracy']
         if f'{who}_position_errors' in rows[0]:
             e = np.concatenate([r[f'{who}_position_errors'] for r in rows])
             out[f'{who}_position_mean_error_m'] = float(e.mean())
@@ -114,8 +128,12 @@ def evaluate_walks(model, fp, params):
         row = {'walk': name, 'scans': len(w),
                'hours': float(gaps[gaps <= DEFAULT_TIMEOUT].sum() / 3600),
                'real_changes': int((truth[1:] != truth[:-1]).sum())}
+        confidence = {'single': e.proba[w].max(axis=1),
+                      'tracked': np.array([tr.confidence for tr in tracks])}
         for who, answer in (('single', single), ('tracked', tracked)):
             row[f'{who}_right'] = int((answer == truth).sum())
+            row[f'{who}_confidence'] = confidence[who].tolist()
+            row[f'{who}_hits'] = (answer == truth).tolist()
             row[f'{who}_wrong_switches'], row[f'{who}_switches'] = \
                 switches(answer, truth)
             row[f'{who}_delay_scans'], row[f'{who}_delay_s'] = \
@@ -173,7 +191,8 @@ def run(args):
     print(f'\nwalks where tracked >= single: '
           f'{summary["walks_tracked_at_least_single"]:.2f}')
     print(f'{"":32s} {"single":>10s} {"tracked":>10s}')
-    for key in ('accuracy', 'wrong_switches_per_hour',
+    for key in ('accuracy', 'ece', 'answered_at_0.5', 'accuracy_at_0.5',
+                'wrong_switches_per_hour',
                 'wrong_switches_per_100_scans', 'median_delay_scans',
                 'median_delay_s', 'changes_not_followed',
                 'position_mean_error_m', 'position_median_error_m',
