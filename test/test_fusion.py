@@ -8,6 +8,7 @@ CSVs with errors that name the file, row and column.
 """
 
 import math
+import sys
 
 from conftest import python_module, run, surveyed_csv
 import numpy as np
@@ -260,3 +261,17 @@ def test_fit_odometry_command_writes_the_fusion_section(tmp_path,
         assert bad.returncode == 2 and message in bad.stderr, bad.stderr
         assert 'Traceback' not in bad.stderr
         assert not (tmp_path / 'x.npz').exists()
+
+
+def test_numpy_random_is_imported_only_when_the_filter_starts():
+    # about 2 MiB of the node's RSS with fusion off
+    # (benchmarks/fusion_cost.py)
+    code = ('import sys\n'
+            'from wifi_place_recognition.core.fusion import Fusion\n'
+            'fusion = Fusion()\n'
+            'fusion.odometry(1.0, 0.0, 0.0, 0.0)\n'
+            'print("numpy.random" in sys.modules)\n'
+            'fusion.scan(1.0, (0.0, 0.0), (0, 0))\n'
+            'print(fusion.filter.started, "numpy.random" in sys.modules)\n')
+    done = run([sys.executable, '-c', code])
+    assert done.stdout.split() == ['False', 'True', 'True'], done.stderr

@@ -157,7 +157,9 @@ class Locator:
         scale = self.scale[self.ap_start[g] + rows]
         if self.metric == 'sorensen':
             refs = self.blocks[g][rows] * scale[:, None]
-            common = np.minimum(refs, values[shared, None]).sum(axis=0)
+            # in place: one temporary of (APs x references) floats, not two
+            common = np.minimum(refs, values[shared, None], out=refs).sum(
+                axis=0)
             total = self.norms[first:last] + float(values.sum())
             return 1.0 - 2.0 * common / np.maximum(total, 1e-12)
         dots = (values[shared] * scale) @ \

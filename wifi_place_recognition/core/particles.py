@@ -182,10 +182,23 @@ class ParticleFilter:
         self.params = params or FusionParams()
         self.motion = MotionModel(self.params)
         self.sensor = WifiSensorModel(self.params)
-        self.rng = np.random.default_rng(seed)
+        self._seed = seed
+        self._rng = None
         self.state = None
         self.weight = None
         self.disagreeing = 0
+
+    @property
+    def rng(self):
+        """
+        Return the random generator, made at the first start.
+
+        Lazily: importing ``numpy.random`` adds about 2 MiB to a process
+        (classifier_node with fusion off never needs it).
+        """
+        if self._rng is None:
+            self._rng = np.random.default_rng(self._seed)
+        return self._rng
 
     @property
     def started(self):
