@@ -20,6 +20,7 @@ from .atomic import atomic_write
 from .locator import LEVELS, Locator, METRICS
 from .model import ACTIVATIONS, Layer, PlaceModel
 from .preprocessing import RssiScaler, SIGNALS
+from .particles import FusionParams
 from .tracking import TrackingParams
 
 FORMAT = 'wifi_place_recognition/model'
@@ -69,6 +70,8 @@ def save_model(model, path):
               'calibration': {'temperature': float(model.temperature)}}
     if model.tracking is not None:
         header['tracking'] = model.tracking.to_dict()
+    if model.fusion is not None:
+        header['fusion'] = model.fusion.to_dict()
     if model.position is not None:
         pos = model.position
         if max(len(pos.xy), len(pos.ap_column)) >= MAX_INDEX:
@@ -215,7 +218,7 @@ def _build(header, arrays):
                              'a position output')
     return PlaceModel(ap_ids, scaler, members, classes,
                       header.get('provenance', {}), _tracking(header),
-                      position, _temperature(header))
+                      position, _temperature(header), _fusion(header))
 
 
 def _temperature(header):
@@ -229,6 +232,16 @@ def _temperature(header):
         raise ModelFileError(f'calibration: temperature {t!r} is not a '
                              f'number in [{low:g}, {high:g}]')
     return float(t)
+
+
+def _fusion(header):
+    """Return the optional odometry fusion parameters (None: defaults)."""
+    if 'fusion' not in header:
+        return None
+    try:
+        return FusionParams.from_dict(header['fusion'])
+    except (TypeError, ValueError) as exc:
+        raise ModelFileError(f'fusion section: {exc}') from None
 
 
 def _tracking(header):

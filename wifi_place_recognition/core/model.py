@@ -6,6 +6,7 @@ import numpy as np
 
 from .locator import Locator
 from .preprocessing import RssiScaler
+from .particles import FusionParams
 from .tracking import TrackingParams
 
 
@@ -85,6 +86,7 @@ class PlaceModel:
     tracking: TrackingParams = None  # from the file, or None
     position: Locator = None      # None: a classifier only
     temperature: float = 1.0      # of the probabilities (1: as computed)
+    fusion: FusionParams = None   # odometry fusion, from the file, or None
     blank: np.ndarray = field(init=False, repr=False)
     first_t: np.ndarray = field(init=False, repr=False)
 
