@@ -37,6 +37,16 @@ def _pair(text):
     return None if text.lower() == 'none' else _names(text)
 
 
+def add_model_arguments(parser, section):
+    """Add ``--model`` and ``-o``: a model file whose ``section`` is fitted."""
+    parser.add_argument('--model', type=Path, required=True,
+                        help='model file from train_model (rewritten unless '
+                             '-o is given)')
+    parser.add_argument('-o', '--output', type=Path,
+                        help=f'write the model with its {section} section '
+                             f'here instead')
+
+
 def add_data_arguments(parser, training=False):
     """Add the options that say how to read fingerprint files."""
     d = ReaderOptions()

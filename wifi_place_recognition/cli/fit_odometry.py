@@ -11,7 +11,8 @@ from ..core.atomic import atomic_write
 from ..core.odometry_fit import fit_odometry
 from ..core.particles import FusionParams
 from ..data.poses import read_poses
-from .common import add_data_arguments, data_options, main_wrapper, read_data
+from .common import (add_data_arguments, add_model_arguments, data_options,
+                     main_wrapper, read_data)
 
 
 @main_wrapper
@@ -26,17 +27,12 @@ def main(argv=None):
                     'odom_topic) and write it into the model file\'s fusion '
                     'section, which classifier_node uses when odometry '
                     'flows.')
-    p.add_argument('--model', type=Path, required=True,
-                   help='model file from train_model (rewritten unless '
-                        '-o is given)')
+    add_model_arguments(p, 'fusion')
     p.add_argument('--data', nargs='+', required=True, metavar='PATH',
                    help='the run\'s scans: CSV with TIMESTAMP, X, Y, YAW '
                         '(the survey the model was trained on will do)')
     p.add_argument('--odometry', type=Path, required=True, metavar='CSV',
                    help='the run\'s odometry: TIMESTAMP, X, Y, YAW')
-    p.add_argument('-o', '--output', type=Path,
-                   help='write the model with its fusion section here '
-                        'instead')
     p.add_argument('--window', type=float, default=3.0, metavar='M',
                    help='metres of travel per stretch (default: '
                         '%(default)s)')

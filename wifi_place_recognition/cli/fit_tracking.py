@@ -11,7 +11,8 @@ from ..core.artifact import load_model, save_model
 from ..core.atomic import atomic_write
 from ..core.tracking_fit import FitOptions, fit_tracking, walk_evidence
 from ..data.walks import walks
-from .common import add_data_arguments, data_options, main_wrapper, read_data
+from .common import (add_data_arguments, add_model_arguments, data_options,
+                     main_wrapper, read_data)
 
 
 @main_wrapper
@@ -24,16 +25,11 @@ def main(argv=None):
                     'of one CSV per walk) and write them into the file\'s '
                     'tracking section, which classifier_node uses with '
                     'tracking:=true.')
-    p.add_argument('--model', type=Path, required=True,
-                   help='model file from train_model (rewritten unless '
-                        '-o is given)')
+    add_model_arguments(p, 'tracking')
     p.add_argument('--walks', nargs='+', required=True, metavar='PATH',
                    help='labelled walks with TIMESTAMP, recorded apart from '
                         'the model\'s training data: CSV(s), or folder(s) '
                         'of one CSV per walk')
-    p.add_argument('-o', '--output', type=Path,
-                   help='write the model with its tracking section here '
-                        'instead')
     p.add_argument('--timeout', type=float, default=FitOptions.timeout,
                    metavar='S',
                    help='scans further apart are not one walk (the node\'s '

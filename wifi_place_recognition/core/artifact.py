@@ -217,8 +217,10 @@ def _build(header, arrays):
         raise ModelFileError('a one-class model without a network must have '
                              'a position output')
     return PlaceModel(ap_ids, scaler, members, classes,
-                      header.get('provenance', {}), _tracking(header),
-                      position, _temperature(header), _fusion(header))
+                      header.get('provenance', {}),
+                      _section(header, TrackingParams),
+                      position, _temperature(header),
+                      _section(header, FusionParams))
 
 
 def _temperature(header):
@@ -234,24 +236,14 @@ def _temperature(header):
     return float(t)
 
 
-def _fusion(header):
-    """Return the optional odometry fusion parameters (None: defaults)."""
-    if 'fusion' not in header:
+def _section(header, kind):
+    """Return a model file's optional section as ``kind`` (None: absent)."""
+    if kind.SECTION not in header:
         return None
     try:
-        return FusionParams.from_dict(header['fusion'])
+        return kind.from_dict(header[kind.SECTION])
     except (TypeError, ValueError) as exc:
-        raise ModelFileError(f'fusion section: {exc}') from None
-
-
-def _tracking(header):
-    """Return the optional tracking parameters (None: the defaults)."""
-    if 'tracking' not in header:
-        return None
-    try:
-        return TrackingParams.from_dict(header['tracking'])
-    except (TypeError, ValueError) as exc:
-        raise ModelFileError(f'tracking section: {exc}') from None
+        raise ModelFileError(f'{kind.SECTION} section: {exc}') from None
 
 
 def _position(header, arrays, n_aps, n_classes):

@@ -17,10 +17,12 @@ laser scan:
   when the scans keep disagreeing with the particles (a kidnapped robot).
 """
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 import math
 
 import numpy as np
+
+from .params import SectionParams
 
 TWO_PI = 2 * math.pi
 
@@ -31,12 +33,17 @@ def wrap(angle):
 
 
 @dataclass(frozen=True)
-class FusionParams:
+class FusionParams(SectionParams):
     """
     The parameters of the odometry + WiFi filter (stored in a model file).
 
     Noise figures are one standard deviation.
     """
+
+    SECTION = 'fusion'
+    POSITIVE = ('particles', 'wifi_sd', 'start_sd', 'reset_sigmas',
+                'reset_after')
+    SIGNED = ('drift_mean',)
 
     particles: int = 3000
     distance_noise: float = 0.02      # fraction of the distance driven
@@ -55,23 +62,7 @@ class FusionParams:
 
     def __post_init__(self):
         """Refuse values that would make the filter meaningless."""
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.name == 'fit':
-                if value is not None and not isinstance(value, dict):
-                    raise ValueError(f'fusion fit must be an object, got '
-                                     f'{type(value).__name__}')
-                continue
-            positive = f.name in ('particles', 'wifi_sd', 'start_sd',
-                                  'reset_sigmas', 'reset_after')
-            if isinstance(value, bool) or \
-                    not isinstance(value, (int, float)) or \
-                    not math.isfinite(value) or \
-                    (value < 0 and f.name != 'drift_mean') or \
-                    (positive and value == 0):
-                raise ValueError(f'fusion parameter {f.name} = {value!r}: '
-                                 f'expected a finite number '
-                                 f'{"> 0" if positive else ">= 0"}')
+        super().__post_init__()
         for name, top in (('particles', 10 ** 6), ('reset_after', 10 ** 6)):
             value = getattr(self, name)
             if value != int(value) or value > top:
@@ -91,18 +82,6 @@ class FusionParams:
         default = FusionParams()
         return {k: v for k, v in asdict(self).items()
                 if v != getattr(default, k)}
-
-    @classmethod
-    def from_dict(cls, data):
-        """Build from :meth:`to_dict` output; raise ValueError naming a key."""
-        if not isinstance(data, dict):
-            raise ValueError(f'fusion must be an object, got '
-                             f'{type(data).__name__}')
-        unknown = sorted(set(data) - {f.name for f in fields(cls)})
-        if unknown:
-            raise ValueError(f'unknown fusion parameter(s) '
-                             f'{", ".join(unknown)}')
-        return cls(**data)
 
 
 @dataclass

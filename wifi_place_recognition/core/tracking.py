@@ -30,10 +30,12 @@ chosen on WiFine's ``val/`` walks with the default recipe's WiFine model
 (one building: its building rate is a choice, 1/200 of the floor rate).
 """
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 import math
 
 import numpy as np
+
+from .params import SectionParams
 
 #: Smallest class probability used as evidence (a softmax can underflow).
 MIN_PROBABILITY = 1e-12
@@ -42,8 +44,11 @@ DEFAULT_TIMEOUT = 600.0
 
 
 @dataclass(frozen=True)
-class TrackingParams:
+class TrackingParams(SectionParams):
     """The parameters of :class:`PlaceTracker`; stored in the model file."""
+
+    SECTION = 'tracking'
+    POSITIVE = ('temperature',)
 
     floor_rate: float = 2e-3         # floor changes per second
     building_rate: float = 1e-5      # building changes per second
@@ -53,43 +58,12 @@ class TrackingParams:
     speed_sd: float = 0.19           # m/s per axis, when a track starts
     fit: dict = None                 # how they were chosen (free-form)
 
-    def __post_init__(self):
-        """Refuse values that would make the filter meaningless."""
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.name == 'fit':
-                if value is not None and not isinstance(value, dict):
-                    raise ValueError(f'tracking fit must be an object, got '
-                                     f'{type(value).__name__}')
-                continue
-            positive = f.name == 'temperature'
-            if isinstance(value, bool) or \
-                    not isinstance(value, (int, float)) or \
-                    not math.isfinite(value) or value < 0 or \
-                    (positive and value == 0):
-                raise ValueError(f'tracking parameter {f.name} = {value!r}: '
-                                 f'expected a finite number '
-                                 f'{"> 0" if positive else ">= 0"}')
-
     def to_dict(self):
         """Return a JSON-ready dict (``fit`` left out when empty)."""
         out = asdict(self)
         if out['fit'] is None:
             del out['fit']
         return out
-
-    @classmethod
-    def from_dict(cls, data):
-        """Build from :meth:`to_dict` output; raise ValueError naming a key."""
-        if not isinstance(data, dict):
-            raise ValueError(f'tracking must be an object, got '
-                             f'{type(data).__name__}')
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ValueError(f'unknown tracking parameter(s) '
-                             f'{", ".join(unknown)}')
-        return cls(**data)
 
 
 @dataclass
