@@ -198,10 +198,12 @@ def running_node(ros, tmp_path, model_path, name, *ros_args):
     proc = NodeProcess(tmp_path, python_module(
         'ros.classifier_node', '--ros-args', '-p', f'model_path:={model_path}',
         *ros_args), name)
-    client = Client(ros, name)
-    model = load_model(model_path)
-    client.wait_ready(proc, (model.ap_ids[:6], [-60.0] * 6))
-    yield client, proc, model
-    client.close()
-    code, log = proc.stop()
+    try:
+        client = Client(ros, name)
+        model = load_model(model_path)
+        client.wait_ready(proc, (model.ap_ids[:6], [-60.0] * 6))
+        yield client, proc, model
+        client.close()
+    finally:    # a failed test stops its node too
+        code, log = proc.stop()
     assert code == 0 and 'Traceback' not in log, log
