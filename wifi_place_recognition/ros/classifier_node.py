@@ -10,6 +10,9 @@ a ``geometry_msgs/PoseWithCovarianceStamped`` on ``~/pose`` per answer;
 ``initialpose`` gets the next confident one after a ``~/publish_initial_pose``
 request and, with ``initial_pose_on_change``, every confident one that
 changes the building/floor or whose position jumps (:mod:`.place_changes`).
+While odometry arrives on ``odom`` (``fusion``), ``~/pose`` is the pose
+fused with it, with a yaw, at every scan and in between
+(:mod:`.odometry_fusion`), and ``initialpose`` carries it.
 Inference is a numpy forward pass: torch is never imported. Each scan is
 processed in the subscription callback. The subscription keeps one scan
 (KEEP_LAST, depth 1): a scan that arrives while another is processed
