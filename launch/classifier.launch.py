@@ -1,4 +1,4 @@
-"""Start classifier_node with the package's params file and a scan remapping."""
+"""Start classifier_node with the package's params file, scan and odometry remapped."""
 
 import os
 
@@ -25,9 +25,15 @@ def generate_launch_description():
             description='topic of the WiFi scans (sensor_msgs/JointState: '
                         'name = BSSID, position = RSSI dBm), remapped to '
                         'the node\'s wifi/scan'),
+        DeclareLaunchArgument(
+            'odom_topic', default_value='odom',
+            description='topic of the robot\'s odometry (nav_msgs/Odometry), '
+                        'remapped to the node\'s odom; fused with the WiFi '
+                        'positions while it flows (parameter fusion)'),
         Node(package='wifi_place_recognition', executable='classifier_node',
              name='classifier_node',
              parameters=[LaunchConfiguration('params_file')],
-             remappings=[('wifi/scan', LaunchConfiguration('scan_topic'))],
+             remappings=[('wifi/scan', LaunchConfiguration('scan_topic')),
+                         ('odom', LaunchConfiguration('odom_topic'))],
              output='screen'),
     ])

@@ -202,8 +202,10 @@ def test_launch_file_declares_described_arguments_it_uses():
         assert 'default_value' in kwargs, name
         declared[name] = kwargs['default_value']
     used = {call.args[0].value for call in _calls(tree, 'LaunchConfiguration')}
-    assert set(declared) == used == {'params_file', 'scan_topic'}
+    assert set(declared) == used == {'params_file', 'scan_topic',
+                                     'odom_topic'}
     assert declared['scan_topic'].value == 'wifi/scan'
+    assert declared['odom_topic'].value == 'odom'
     config = [a.value for a in ast.walk(declared['params_file'])
               if isinstance(a, ast.Constant)]
     assert (REPO / config[-2] / config[-1]).is_file(), config
