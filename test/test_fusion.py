@@ -114,16 +114,60 @@ def test_without_odometry_scans_are_applied_alone_after_the_timeout():
     assert back.with_odometry
 
 
-def test_a_confident_scan_of_another_floor_restarts_there():
+def test_two_confident_scans_of_another_floor_restart_there():
     fusion = Fusion(seed=0)
     fusion.odometry(0.0, 0.0, 0.0, 0.0)
-    fusion.odometry(2.0, 0.0, 0.0, 0.0)
-    fusion.scan(0.5, [0.0, 0.0], (0, 0))
-    assert fusion.scan(1.0, [20.0, 0.0], (0, 1), confident=False) == []
-    assert fusion.counts['scans_other_place'] == 1
-    [moved] = fusion.scan(1.5, [20.0, 0.0], (0, 1))
+    fusion.odometry(3.0, 0.0, 0.0, 0.0)
+    [first] = fusion.scan(0.5, [0.0, 0.0], (0, 0), confident=False)
+    assert first.restarted and fusion.place == (0, 0)   # a start: any scan
+    # another floor: unconfident, then confident once: not applied
+    for stamp, confident in ((1.0, False), (1.5, True), (2.0, False),
+                             (2.5, True)):
+        [kept] = fusion.scan(stamp, [20.0, 0.0], (0, 1), confident)
+        assert not kept.restarted and fusion.place == (0, 0)
+        assert np.linalg.norm(kept.xy) < 3.0
+    assert fusion.counts['scans_other_place'] == 4
+    [moved] = fusion.scan(2.8, [20.0, 0.0], (0, 1))    # twice in a row
     assert moved.restarted and fusion.place == (0, 1)
     assert np.linalg.norm(moved.xy - [20.0, 0.0]) < 3.0
+    assert moved.cov[2, 2] == 1e6           # a start: the heading unknown
+    assert fusion.scan(2.9, [math.nan, 0.0], (0, 1)) is None
+    assert fusion.counts['scans_without_position'] == 1
+
+
+def test_a_long_gap_without_odometry_starts_afresh_and_a_short_one_spreads():
+    fusion = Fusion(limits=FusionLimits(odom_timeout=0.5), seed=0)
+    truth, odo = straight(n=600)
+    at = np.arange(5, 600, 10)
+    xy, yaw, cov = fuse_offline(odo, (truth[at, 0] + 0.01,
+                                      truth[at, 1:3]), fusion)
+    assert cov[-1, 2, 2] < 0.1                         # heading found
+    t = truth[-1, 0]
+    assert fusion.scan(t + 2.0, truth[-1, 1:3], PLACE, arrival=0.0) == []
+    assert fusion.expire(0.4) == []
+    [short] = fusion.expire(0.6)
+    assert not short.restarted and short.cov[2, 2] > cov[-1, 2, 2]
+    fusion.scan(t + 60.0, truth[-1, 1:3], PLACE, arrival=1.0)
+    [long] = fusion.expire(2.0)
+    assert long.restarted and long.cov[2, 2] == 1e6
+
+
+def test_a_clock_that_restarts_starts_a_new_odometry_timeline():
+    fusion = Fusion(seed=0)
+    truth, odo = straight(n=300)
+    at = np.arange(5, 300, 10)
+    fuse_offline(odo, (truth[at, 0] + 0.01, truth[at, 1:3]), fusion)
+    before = fusion.counts['scans_fused']
+    # the clock goes back 100 s for good; the robot drives on 10 m
+    later = odo[-1, 1:] + np.column_stack([np.arange(1, 201) * 0.05,
+                                           np.zeros((200, 2))])
+    stamps = odo[-1, 0] - 100.0 + np.arange(1, 201) * 0.1
+    faults = [fusion.odometry(t, *pose)[0] for t, pose in
+              zip(stamps, later)]
+    assert faults[0] == 'odometry_clock_reset' and not any(faults[1:])
+    [after] = fusion.scan(stamps[-2], [truth[-1, 1] + 10.0, 0.0], PLACE)
+    assert fusion.counts['scans_fused'] == before + 1
+    assert abs(after.xy[0] - truth[-1, 1] - 10.0) < 2.0
 
 
 def test_the_filter_finds_the_heading_and_follows_a_drifting_odometry():

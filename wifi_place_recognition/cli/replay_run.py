@@ -64,6 +64,9 @@ def main(argv=None):
     odometry = read_poses(args.odometry)
     truth = truth_at(read_poses(args.truth), fp.meta['TIMESTAMP']) \
         if args.truth else _own_truth(fp)
+    if not np.isfinite(truth[0]).all(axis=1).any():
+        raise ValueError(f'{args.truth or fp.source}: no true pose within '
+                         f'the time span of the scans of {fp.source}')
     try:
         options = RunReplayOptions(args.place_topic, args.pose_topic,
                                    args.speed, args.wait)

@@ -10,14 +10,20 @@ particles move in steps of ``step_m`` / ``step_rad``; the pose in between
 is the filter's estimate carried forward by the odometry since.
 
 Odometry is input like any other (:meth:`Fusion.odometry` returns why a
-message was refused): a non-finite pose, a stamp before the previous one,
-or a jump faster than ``max_speed`` / ``max_turn_rate`` (a reset to zero,
-a teleport) is counted and skipped; the filter re-anchors on the next
-good pose. A stamp equal to the previous one is skipped and counted as no
-fault (the next pose carries its motion). When odometry stops (none for ``odom_timeout`` seconds of
-the scans' clock), scans are applied alone: the particles spread by
-``idle_speed`` per second (WiFi alone) until odometry returns.
-A confident scan of another building/floor restarts the filter there.
+message was refused): a non-finite pose or a stamp before the previous
+one is counted and skipped; a jump faster than ``max_speed`` /
+``max_turn_rate`` (a reset to zero, a teleport) is counted and the filter
+continues from the jumped pose as if the robot had not moved; a stamp
+more than ``odom_timeout`` before the previous one (a clock restarted) is
+counted and starts a new odometry timeline. A stamp equal to the previous
+one is skipped and counted as no fault (the next pose carries its
+motion). A scan that waited ``odom_timeout`` seconds (on the clock of its
+``arrival``) without odometry covering it is applied alone: the particles
+spread by ``idle_speed`` and ``idle_turn_rate`` per second since the last
+scan, or start afresh at the scan when that spread exceeds a start's.
+Two confident scans in a row of another building/floor restart the filter
+there (a lift); a scan of another place is otherwise not applied, and
+gets the current pose.
 """
 
 from collections import Counter, deque
@@ -30,7 +36,7 @@ from .particles import ParticleFilter, wrap
 
 #: Why odometry or a scan was not applied (counted in ``Fusion.counts``).
 ODOMETRY_FAULTS = ('odometry_invalid', 'odometry_out_of_order',
-                   'odometry_jump')
+                   'odometry_jump', 'odometry_clock_reset')
 
 
 @dataclass(frozen=True)
@@ -100,9 +106,11 @@ class Fusion:
     def reset(self):
         """Forget everything but the counts: the next scan starts afresh."""
         self.odom = deque(maxlen=self.limits.history)  # (t, x, y, yaw)
-        self.pending = []       # (stamp, xy, place, arrival), stamp order
+        self.pending = []       # (stamp, xy, place or None: not applied,
+        #                         arrival), in stamp order
         self.anchor = None      # the odometry pose the particles are at
         self.place = None
+        self._candidate = None  # a confident scan's other place, once
         self.last_scan = None   # stamp of the last scan applied
         self.filter.state = None
 
@@ -126,6 +134,9 @@ class Fusion:
             if dt == 0:     # the next pose carries its motion
                 self.counts['odometry_same_stamp'] += 1
                 return None, []
+            if dt < -self.limits.odom_timeout:     # a new timeline
+                self._reanchor(pose)
+                return self._fault('odometry_clock_reset'), []
             if dt <= 0:
                 return self._fault('odometry_out_of_order'), []
             step = relative(last[1:], pose[1:])
@@ -152,15 +163,24 @@ class Fusion:
         """
         Take one scan's answer; return the fused poses now available.
 
-        ``place``: its (building, floor); a confident scan of another place
-        restarts the filter there, an unconfident one is not applied.
+        ``place``: its (building, floor); the second confident scan in a
+        row of another place restarts the filter there, any other scan of
+        another place is not applied (its pose is the filter's).
         ``arrival``: when it arrived, on the clock :meth:`expire` is given
-        (default: its stamp).
+        (default: its stamp). A scan without a finite position is refused
+        (counted, None returned).
         """
-        if place != self.place and not confident:
+        xy = np.asarray(xy, np.float64)
+        if not (xy.shape == (2,) and np.isfinite(xy).all() and
+                math.isfinite(stamp)):
+            self.counts['scans_without_position'] += 1
+            return None
+        moved = place != self.place and self.place is not None
+        if moved:
             self.counts['scans_other_place'] += 1
-            return []
-        self.pending.append((float(stamp), np.asarray(xy, np.float64), place,
+        apply = not moved or (confident and self._candidate == place)
+        self._candidate = place if moved and confident else None
+        self.pending.append((float(stamp), xy, place if apply else None,
                              float(stamp if arrival is None else arrival)))
         self.pending.sort(key=lambda item: item[0])
         return self._advance()
@@ -176,7 +196,7 @@ class Fusion:
                 now - self.pending[0][3] > self.limits.odom_timeout and \
                 not self._covered(self.pending[0][0]):
             out.append(self._apply(*self.pending.pop(0)[:3], odometry=False))
-        return out + self._advance()
+        return [pose for pose in out if pose is not None] + self._advance()
 
     def _covered(self, stamp):
         return bool(self.odom) and self.odom[-1][0] >= stamp
@@ -186,11 +206,16 @@ class Fusion:
         out = []
         while self.pending and self._covered(self.pending[0][0]):
             out.append(self._apply(*self.pending.pop(0)[:3], odometry=True))
+        out = [pose for pose in out if pose is not None]
         if not self.pending and self.anchor is not None and self.odom:
-            step = relative(self.anchor[1:], self.odom[-1][1:])
-            if math.hypot(step[0], step[1]) >= self.limits.step_m or \
-                    abs(step[2]) >= self.limits.step_rad:
-                self._move_to(self.odom[-1])
+            # not up to the newest: a scan still on its way lands after it
+            target = self._odometry_at(self.odom[-1][0] -
+                                       self.limits.odom_timeout)
+            step = relative(self.anchor[1:], target[1:])
+            if target[0] > self.anchor[0] and (
+                    math.hypot(step[0], step[1]) >= self.limits.step_m or
+                    abs(step[2]) >= self.limits.step_rad):
+                self._move_to(target)
         return out
 
     def _odometry_at(self, stamp):
@@ -215,8 +240,14 @@ class Fusion:
             self.odom.popleft()
 
     def _apply(self, stamp, xy, place, odometry):
-        restart = not self.filter.started or place != self.place
+        """Apply one scan (``place`` None: only move to it); its pose."""
+        if place is None and not self.filter.started:
+            return None
+        restart = place is not None and (not self.filter.started or
+                                         place != self.place)
         if odometry:
+            if self.anchor is not None and stamp < self.anchor[0]:
+                self.counts['scans_late'] += 1
             pose = self._odometry_at(max(stamp, self.anchor[0])
                                      if self.anchor and not restart
                                      else stamp)
@@ -226,12 +257,17 @@ class Fusion:
                 self._move_to(pose)
         else:
             self.anchor = None
-            if not restart and self.last_scan is not None:
-                self.filter.spread(max(stamp - self.last_scan, 0.0))
+            gap = stamp - self.last_scan if self.last_scan is not None \
+                else 0.0
+            if self.filter.params.idle_speed * gap > \
+                    self.filter.params.start_sd and place is not None:
+                restart = True      # WiFi alone long enough: no prior
+            elif self.filter.started:
+                self.filter.spread(max(gap, 0.0))
         if restart:
             self.filter.start(xy)
             self.place = place
-        if self.filter.update(xy):
+        if place is not None and self.filter.update(xy):
             restart = True
         self.counts['restarts'] += restart
         self.last_scan = stamp

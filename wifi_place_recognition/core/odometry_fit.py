@@ -48,7 +48,9 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0):
     ok = np.isfinite(stamps) & np.isfinite(xy).all(axis=1) & \
         np.isfinite(yaw) & (stamps >= odometry[0, 0]) & \
         (stamps <= odometry[-1, 0])
-    stamps, xy, yaw = stamps[ok], np.asarray(xy)[ok], np.asarray(yaw)[ok]
+    order = np.argsort(stamps[ok], kind='stable')    # rows in time order
+    stamps, xy = stamps[ok][order], np.asarray(xy)[ok][order]
+    yaw = np.asarray(yaw)[ok][order]
     t = odometry[:, 0]
     odo_yaw = np.interp(stamps, t, np.unwrap(odometry[:, 3]))
     odo_xy = np.column_stack([np.interp(stamps, t, odometry[:, 1]),

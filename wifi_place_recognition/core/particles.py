@@ -25,6 +25,10 @@ import numpy as np
 from .params import SectionParams
 
 TWO_PI = 2 * math.pi
+#: Variance (rad^2) of a heading the filter does not know.
+UNKNOWN_VARIANCE = 1e6
+#: Below this mean resultant length of the headings, the yaw is unknown.
+MIN_RESULTANT = 0.5
 
 
 def wrap(angle):
@@ -41,8 +45,8 @@ class FusionParams(SectionParams):
     """
 
     SECTION = 'fusion'
-    POSITIVE = ('particles', 'wifi_sd', 'start_sd', 'reset_sigmas',
-                'reset_after')
+    POSITIVE = ('particles', 'wifi_sd', 'wifi_outlier', 'start_sd',
+                'reset_sigmas', 'reset_after')
     SIGNED = ('drift_mean',)
 
     particles: int = 3000
@@ -58,6 +62,7 @@ class FusionParams(SectionParams):
     reset_sigmas: float = 3.0         # a scan this many sd off disagrees
     reset_after: int = 10             # so many in a row: start afresh
     idle_speed: float = 0.5           # m/s: spread per second without odometry
+    idle_turn_rate: float = 0.5       # rad/s: the same for the heading
     fit: dict = None                  # how they were chosen (free-form)
 
     def __post_init__(self):
@@ -123,8 +128,11 @@ class MotionModel:
 
     def spread(self, state, seconds, rng):
         """Spread ``state`` for ``seconds`` without odometry (WiFi alone)."""
-        sd = self.params.idle_speed * seconds
-        state[:, :2] += sd * rng.standard_normal((len(state), 2))
+        n = len(state)
+        state[:, :2] += self.params.idle_speed * seconds * \
+            rng.standard_normal((n, 2))
+        state[:, 2] = wrap(state[:, 2] + self.params.idle_turn_rate *
+                           seconds * rng.standard_normal(n))
 
 
 class WifiSensorModel:
@@ -229,7 +237,11 @@ class ParticleFilter:
             self.start(xy)
             return True
         self.weight = self.weight * self.sensor.likelihood(self.state, xy)
-        self.weight /= self.weight.sum()
+        total = self.weight.sum()
+        if not (math.isfinite(total) and total > 0):    # nothing fits
+            self.start(xy)
+            return True
+        self.weight /= total
         if 1.0 / (self.weight ** 2).sum() < len(self.weight) / 2:
             self._resample()
         return False
@@ -244,7 +256,13 @@ class ParticleFilter:
         self.weight = np.full(n, 1.0 / n)
 
     def estimate(self):
-        """Return the weighted mean pose and its covariance."""
+        """
+        Return the weighted mean pose and its covariance.
+
+        While the headings are spread round the circle (their mean
+        resultant length below :data:`MIN_RESULTANT`: after a start), the
+        yaw is unknown: its variance :data:`UNKNOWN_VARIANCE`.
+        """
         w = self.weight
         xy = w @ self.state[:, :2]
         c, s = w @ np.cos(self.state[:, 2]), w @ np.sin(self.state[:, 2])
@@ -252,4 +270,7 @@ class ParticleFilter:
         delta = np.column_stack([self.state[:, :2] - xy,
                                  wrap(self.state[:, 2] - yaw)])
         cov = (delta * w[:, None]).T @ delta
+        if math.hypot(c, s) < MIN_RESULTANT:
+            cov[2, :] = cov[:, 2] = 0.0
+            cov[2, 2] = UNKNOWN_VARIANCE
         return Estimate(xy, yaw, cov)

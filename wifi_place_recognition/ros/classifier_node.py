@@ -268,15 +268,24 @@ class ClassifierNode(Node):
                                     floor=place.floor)
 
     def _fuse(self, place, stamp, confident, reasons):
-        """Feed the scan's own position to the filter; initialpose waits."""
+        """
+        Feed the scan's own position to the filter; initialpose waits.
+
+        The filter follows the answer's place (the tracked one with
+        tracking), as ``~/place`` and ``~/current_place`` do.
+        """
         if confident and self._send_initial_pose:
             self._send_initial_pose = False
             reasons = reasons + ['requested']
         if reasons:
             self._initial_pending = (stamp, reasons)
-        self.odometry.scan(stamp, place.scan_position,
-                           (place.scan_building, place.scan_floor),
-                           confident)
+        try:
+            self.odometry.scan(stamp, place.scan_position,
+                               (place.building, place.floor), confident)
+        except Exception as exc:  # never let one scan stop the node
+            self.counts['rejected/internal_error'] += 1
+            self.get_logger().error(f'fusion failed on a scan: {exc!r}',
+                                    throttle_duration_sec=THROTTLE_S)
 
     def _publish_fused(self, fused, stamp, place):
         """Publish a fused pose; on initialpose too if one waits for it."""

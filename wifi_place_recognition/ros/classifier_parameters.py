@@ -53,7 +53,8 @@ TOPICS = (
      'a model with positions: a confident answer to seed a localiser '
      '(see publish_initial_pose, initial_pose_on_change)'),
     ('service', '~/reset', Trigger,
-     'forget the tracked belief: the next scan starts afresh'),
+     'forget the tracked belief and the fused pose: the next scan starts '
+     'afresh'),
     ('service', '~/publish_initial_pose', Trigger,
      'a model with positions: send the next confident answer on '
      'initialpose'),

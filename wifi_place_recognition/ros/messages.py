@@ -7,9 +7,12 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from sensor_msgs.msg import JointState
 import numpy as np
 
+from ..core import particles
+
 #: Variance (rad^2) of the unknown yaw, and of z, roll and pitch: WiFi
-#: gives no orientation, and the floor is given by the frame.
-UNKNOWN_VARIANCE = 1e6
+#: gives no orientation, and the floor is given by the frame (the
+#: filter's own figure for a heading it does not know).
+UNKNOWN_VARIANCE = particles.UNKNOWN_VARIANCE
 
 
 def seconds(stamp):

@@ -32,6 +32,8 @@ HEALTH_NAMES = {'odometry': 'odometry_received',
                 'scans_fused': 'fusion_scans_fused',
                 'scans_alone': 'fusion_scans_alone',
                 'scans_other_place': 'fusion_scans_other_place',
+                'scans_late': 'fusion_scans_late',
+                'scans_without_position': 'fusion_scans_without_position',
                 'restarts': 'fusion_restarts'}
 #: Scans kept waiting for odometry at most (more: the oldest forgotten).
 MAX_WAITING = 100
@@ -48,6 +50,8 @@ class OdometryFusion:
         self._published_stamp = None
         self._stamps = {}   # float stamp -> the message's, to publish it
         self._odometry_stamp = (None, None)
+        self._odometry_arrival = -math.inf   # monotonic s, last good one
+        self.counts_internal = 0
         self._timer = None
         self.enabled = True
         self._subscription = node.create_subscription(
@@ -91,16 +95,34 @@ class OdometryFusion:
     def scan(self, stamp, xy, place, confident):
         """Feed the answer to one scan; publish the poses it releases."""
         seconds = stamp_time(stamp, self._node.get_clock())
+        now = time.monotonic()
+        timeout = self.fusion.limits.odom_timeout
+        stale = now - self._odometry_arrival > timeout
         self._stamps[seconds] = stamp
-        self._emit(self.fusion.scan(seconds, xy, place, confident,
-                                    time.monotonic()))
+        released = self.fusion.scan(
+            seconds, xy, place, confident,
+            now - 2 * timeout if stale else now)  # stale: no waiting
+        if released is None:
+            del self._stamps[seconds]
+            self._problem('a scan without a finite position: not fused')
+            return
+        self._emit(released)
+        if stale:
+            self._expire(now)
         if len(self._stamps) > MAX_WAITING:     # never released: forget
-            for key in sorted(self._stamps)[:-MAX_WAITING]:
+            for key in list(self._stamps)[:-MAX_WAITING]:
                 del self._stamps[key]
 
     def _on_odometry(self, msg):
         if not self.enabled:
             return
+        try:
+            self._odometry(msg)
+        except Exception as exc:   # never let one message stop the node
+            self.counts_internal += 1
+            self._problem(f'internal error on odometry: {exc!r}')
+
+    def _odometry(self, msg):
         pose = msg.pose.pose
         seconds = stamp_time(msg.header.stamp, self._node.get_clock())
         problem = pose_problem(pose)    # e.g. a zero quaternion: no yaw
@@ -109,6 +131,7 @@ class OdometryFusion:
                                             pose.position.y, yaw)
         if not fault:
             self._odometry_stamp = (seconds, msg.header.stamp)
+            self._odometry_arrival = time.monotonic()
         else:
             where = problem or (f'x {pose.position.x:g}, y '
                                 f'{pose.position.y:g}')
@@ -120,16 +143,25 @@ class OdometryFusion:
     def _on_timer(self):
         if not self.enabled:
             return
-        fused = self.fusion.expire(time.monotonic())
+        try:
+            self._expire(time.monotonic())
+            if self.pose_rate and \
+                    self.fusion.odometry_stamp != self._published_stamp:
+                pose = self.fusion.pose()
+                if pose is not None:
+                    self._emit([pose])
+        except Exception as exc:   # never let the timer stop the node
+            self.counts_internal += 1
+            self._problem(f'internal error in the fusion timer: {exc!r}')
+
+    def _expire(self, now):
+        """Publish the scans that waited too long, fused alone; say so."""
+        fused = self.fusion.expire(now)
         if fused:
-            timeout = self.fusion.limits.odom_timeout
-            self._problem(f'no odometry for {timeout:g} s: {len(fused)} '
-                          f'scan(s) fused alone (WiFi only)')
+            self._problem(f'no odometry covering {len(fused)} scan(s) '
+                          f'within {self.fusion.limits.odom_timeout:g} s: '
+                          f'fused alone (WiFi only)')
         self._emit(fused)
-        if self.pose_rate:
-            pose = self.fusion.pose()
-            if pose is not None and pose.stamp != self._published_stamp:
-                self._emit([pose])
 
     def _emit(self, poses):
         for pose in poses:
@@ -151,7 +183,12 @@ class OdometryFusion:
         values = {HEALTH_NAMES.get(k, k): counts.get(k, 0) for k in
                   ('odometry', 'odometry_same_stamp') + ODOMETRY_FAULTS +
                   ('scans_fused', 'scans_alone', 'scans_other_place',
-                   'restarts')}
+                   'scans_late', 'scans_without_position', 'restarts')}
+        values['fusion_internal_errors'] = self.counts_internal
         what, when = self._last_problem
-        recent = time.monotonic() - when < WARN_S
-        return (what if recent else None), values
+        now = time.monotonic()
+        silent = now - self._odometry_arrival
+        if self.enabled and self.fusion.odometry_stamp is not None and \
+                silent > self.fusion.limits.odom_timeout:
+            return f'no odometry for {silent:.1f} s', values
+        return (what if now - when < WARN_S else None), values
