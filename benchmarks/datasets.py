@@ -27,6 +27,16 @@ for _name in PANEL:
     DATASETS[_name] = dict(train=[f'panel/{_name}/train.csv'],
                            test=[f'panel/{_name}/test.csv'], options={},
                            args=[])
+#: Robot runs (one floor each: position-only models, judged on the 95 %
+#: circle): trained on one run of a site, tested on another.
+ROBOT = {'b14-1-2': ('b14', 1, 2), 'b14-2-3': ('b14', 2, 3),
+         'b14-3-1': ('b14', 3, 1), 'b24-2-3': ('b24', 2, 3),
+         'b24-3-2': ('b24', 3, 2)}
+for _name, (_site, _train, _test) in ROBOT.items():
+    DATASETS[_name] = dict(
+        train=[f'robot/{_site}/{_site}test{_train}/scans.csv'],
+        test=[f'robot/{_site}/{_site}test{_test}/scans.csv'], options={},
+        args=[])
 #: Published building+floor (%): (best of the benchmark, its k-NN).
 PUBLISHED = {'tut1': (91.22, 90.82), 'tut2': (94.32, 94.32),
              'tut5': (98.27, 96.84), 'tut6': (99.77, 99.66),

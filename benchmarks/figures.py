@@ -47,6 +47,7 @@ DPI = 90
 #: k-NN baselines).
 PANEL_FILES = ('panel.json', 'panel-large.json', 'panel-patience5-floor.json')
 CONFUSION_FILE = 'shipped-model-ujiindoorloc-public.json'
+FUSION_FILE = 'fusion.json'
 #: (file, title) of the tracking runs drawn.
 TRACKING_RUNS = (('tracking-wifine-test.json', 'WiFine test/: 85 walks'),
                  ('tracking-ujiindoorloc-public.json',
@@ -196,9 +197,6 @@ def draw_tracking(out):
         ax.grid(alpha=0.3)
     return _save(fig, out / 'tracking-walks.png',
                  [name for name, _ in TRACKING_RUNS])
-
-
-FUSION_FILE = 'fusion.json'
 
 
 def draw_robot(out):

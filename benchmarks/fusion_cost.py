@@ -55,7 +55,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from wifi_place_recognition.core.atomic import atomic_write
-from wifi_place_recognition.core.particles import wrap
+from wifi_place_recognition.core.trajectory import truth_at
 from wifi_place_recognition.core.resources import default_model_path
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.poses import read_poses
@@ -96,10 +96,8 @@ def cpu_seconds(pid):
 def resample(odom, rate):
     """Return the (t, x, y, yaw) rows of ``odom`` every 1/``rate`` s."""
     t = np.arange(odom[0, 0], odom[-1, 0], 1.0 / rate)
-    yaw = np.unwrap(odom[:, 3])
-    return np.column_stack([t, np.interp(t, odom[:, 0], odom[:, 1]),
-                            np.interp(t, odom[:, 0], odom[:, 2]),
-                            wrap(np.interp(t, odom[:, 0], yaw))])
+    xy, yaw = truth_at(odom, t)     # inside the span: no NaN
+    return np.column_stack([t, xy, yaw])
 
 
 def percentiles(values):

@@ -58,20 +58,10 @@ from wifi_place_recognition.ros.classifier_parameters import PARAMETERS
 from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.folds import grouped_folds
 
-from datasets import DATASETS, PANEL, PUBLISHED
+from datasets import DATASETS, PANEL, PUBLISHED, ROBOT
 from runs import summary, train_and_test
 
 ROOT = Path(__file__).resolve().parent.parent
-#: Robot runs (one floor each: position-only models, judged on the 95 %
-#: circle): trained on one run of a site, tested on another.
-ROBOT = {'b14-1-2': ('b14', 1, 2), 'b14-2-3': ('b14', 2, 3),
-         'b14-3-1': ('b14', 3, 1), 'b24-2-3': ('b24', 2, 3),
-         'b24-3-2': ('b24', 3, 2)}
-for _name, (_site, _train, _test) in ROBOT.items():
-    DATASETS[_name] = dict(
-        train=[f'robot/{_site}/{_site}test{_train}/scans.csv'],
-        test=[f'robot/{_site}/{_site}test{_test}/scans.csv'], options={},
-        args=[])
 ALL = PANEL + ('ujiindoorloc', 'wifine') + tuple(ROBOT)
 KS = (1, 3, 5, 7, 9, 11)
 

@@ -25,7 +25,6 @@ import tempfile
 
 import numpy as np
 from wifi_place_recognition.cli import fit_tracking
-from wifi_place_recognition.cli.evaluate_model import THRESHOLDS
 from wifi_place_recognition.cli.common import (
     add_data_arguments, add_download_arguments, data_options, read_data)
 from wifi_place_recognition.core.artifact import load_model
@@ -95,8 +94,7 @@ def _summary(rows):
         confidence = np.concatenate([r[f'{who}_confidence'] for r in rows])
         hits = np.concatenate([r[f'{who}_hits'] for r in rows])
         out[f'{who}_ece'] = expected_calibration_error(confidence, hits)
-        out[f'{who}_risk_coverage'] = risk_coverage(confidence, hits,
-                                                    THRESHOLDS)
+        out[f'{who}_risk_coverage'] = risk_coverage(confidence, hits)
         point = next(p for p in out[f'{who}_risk_coverage']
                      if p['threshold'] == 0.5)
         out[f'{who}_answered_at_0.5'] = point['coverage']

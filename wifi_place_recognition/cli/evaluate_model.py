@@ -5,7 +5,6 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
 
 from ..core.artifact import load_model
 from ..core.evaluation import evaluate
@@ -63,10 +62,6 @@ def main(argv=None):
     return 0
 
 
-#: Thresholds of the risk-coverage curve: 0, 0.01, ..., 1.
-THRESHOLDS = np.round(np.linspace(0.0, 1.0, 101), 2)
-
-
 def calibration(fp, predictions, model):
     """
     Return how well the confidences match the hit rate.
@@ -82,7 +77,7 @@ def calibration(fp, predictions, model):
     return {'temperature': model.temperature,
             'ece': expected_calibration_error(confidence, right),
             'reliability': reliability(confidence, right),
-            'risk_coverage': risk_coverage(confidence, right, THRESHOLDS)}
+            'risk_coverage': risk_coverage(confidence, right)}
 
 
 def _plot(args, model, fp, result, predictions):

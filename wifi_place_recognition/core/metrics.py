@@ -62,7 +62,11 @@ def expected_calibration_error(confidence, right, bins=10):
                      for r in rows) / max(len(confidence), 1))
 
 
-def risk_coverage(confidence, right, thresholds):
+#: Thresholds of the risk-coverage curve: 0, 0.01, ..., 1.
+THRESHOLDS = np.round(np.linspace(0.0, 1.0, 101), 2)
+
+
+def risk_coverage(confidence, right, thresholds=THRESHOLDS):
     """
     Return, per threshold, the share of scans answered and their accuracy.
 

@@ -72,8 +72,8 @@ class PlaceModel:
 
     ``members`` holds one or more networks (lists of :class:`Layer`); the
     probabilities are the mean of their softmax outputs, tempered by
-    ``temperature`` (:func:`tempered`; fitted on the selection's held-out
-    scans, 1 in files without one). A model of one
+    ``temperature`` (:func:`tempered`; fitted on validation data, else 1).
+    A model of one
     class has no network (``members`` empty): every scan is that class,
     with probability 1, and the model is there for its position output.
     """

@@ -178,10 +178,10 @@ class FingerprintLog:
                     f'{",".join(LEADING)})')
         if bool(self._position_columns(line)) != self.positions:
             return 'recorded ' + (
-                'without positions (no X,Y,FRAME columns): cannot add '
+                'without positions (no X,Y[,YAW],FRAME columns): cannot add '
                 'positions half-way; record them to a new file'
                 if self.positions else
-                'with positions (X,Y,FRAME columns): cannot continue '
+                'with positions (X,Y[,YAW],FRAME columns): cannot continue '
                 'without them; set pose_topic, or use a new file')
         return None
 

@@ -5,17 +5,13 @@ import math
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
-                                ParameterDescriptor)
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from ..core.tracking import DEFAULT_TIMEOUT
 from . import node_interface
-
-
-def _floats(low, high):
-    return [FloatingPointRange(from_value=low, to_value=high)]
+from .node_interface import float_range
 
 
 def _integers(low, high):
@@ -67,7 +63,7 @@ PARAMETERS = (
                     'UJIIndoorLoc model', read_only=True)),
     ('min_confidence', 0.5, ParameterDescriptor(
         description='below this top-class probability the status is WARN',
-        floating_point_range=_floats(0.0, 1.0))),
+        floating_point_range=float_range(0.0, 1.0))),
     ('min_known_aps', 3, ParameterDescriptor(
         description='with fewer APs known to the model the status is WARN',
         integer_range=_integers(0, 10000))),
@@ -80,7 +76,7 @@ PARAMETERS = (
     ('tracking_timeout', DEFAULT_TIMEOUT, ParameterDescriptor(
         description='seconds between scans (header.stamp) after which the '
                     'tracked belief restarts',
-        floating_point_range=_floats(1.0, 1e6))),
+        floating_point_range=float_range(1.0, 1e6))),
     ('frame_id', 'map', ParameterDescriptor(
         description='frame of ~/pose and initialpose; may contain '
                     '{building} and {floor} (one map per floor)')),
@@ -95,7 +91,7 @@ PARAMETERS = (
         description='a jump: the tracked position moved more than this many '
                     'standard deviations of the previous answer\'s '
                     '(Mahalanobis distance)',
-        floating_point_range=_floats(1.0, 100.0))),
+        floating_point_range=float_range(1.0, 100.0))),
     ('fusion', True, ParameterDescriptor(
         description='while odometry arrives on odom, fuse it with the WiFi '
                     'positions (a particle filter over x, y, yaw; a model '
@@ -103,11 +99,11 @@ PARAMETERS = (
     ('odom_timeout', 1.0, ParameterDescriptor(
         description='seconds a scan waits for odometry covering its stamp; '
                     'then it is fused alone (WiFi only, WARN)',
-        floating_point_range=_floats(0.05, 60.0))),
+        floating_point_range=float_range(0.05, 60.0))),
     ('pose_rate', 10.0, ParameterDescriptor(
         description='fused poses per second on ~/pose between scans (0: at '
                     'scans only)',
-        floating_point_range=_floats(0.0, 100.0))),
+        floating_point_range=float_range(0.0, 100.0))),
 )
 #: Parameters that :meth:`PlaceRecognizer.configure` takes, by name.
 RECOGNIZER_SETTINGS = ('min_confidence', 'min_known_aps', 'max_aps',

@@ -11,9 +11,16 @@ ROS.
 
 import textwrap
 
+from rcl_interfaces.msg import FloatingPointRange
+
 OPTIONS = ('-h', '--help')
 TYPES = {bool: 'bool', int: 'integer', float: 'double', str: 'string'}
 WIDTH = 79
+
+
+def float_range(low, high):
+    """Return a descriptor's floating_point_range from ``low`` to ``high``."""
+    return [FloatingPointRange(from_value=low, to_value=high)]
 
 
 def declare(node, parameters):

@@ -13,6 +13,7 @@ the health status is WARN while odometry is faulty or stale.
 """
 
 import copy
+from dataclasses import replace
 import math
 import time
 
@@ -61,8 +62,8 @@ class OdometryFusion:
     def configure(self, odom_timeout=None, pose_rate=None):
         """Change the timeout (s) or the between-scan rate (Hz; 0: none)."""
         if odom_timeout is not None:
-            self.fusion.limits = FusionLimits(
-                **{**vars(self.fusion.limits), 'odom_timeout': odom_timeout})
+            self.fusion.limits = replace(self.fusion.limits,
+                                         odom_timeout=odom_timeout)
         if pose_rate is not None:
             if self._timer is not None:
                 self._node.destroy_timer(self._timer)

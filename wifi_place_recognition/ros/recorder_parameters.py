@@ -3,9 +3,10 @@
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
-                                ParameterDescriptor)
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from sensor_msgs.msg import JointState
+
+from .node_interface import float_range
 
 SUMMARY = """
 Records a survey: appends every scan on wifi/scan to the fingerprint CSV
@@ -61,6 +62,6 @@ PARAMETERS = (
                     'walk1.odom.csv); empty: no odometry', read_only=True)),
     ('max_pose_age', 2.0, ParameterDescriptor(
         description='s: the largest time between a scan and the pose that '
-                    'labels it', floating_point_range=[FloatingPointRange(
-                        from_value=0.0, to_value=3600.0)])),
+                    'labels it', floating_point_range=float_range(0.0,
+                                                                  3600.0))),
 )

@@ -1,10 +1,11 @@
 """wifi_scanner_node's interface: what it does, its topics, its parameters."""
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor
 from sensor_msgs.msg import JointState
 
 from ..data.wifi_sources import SOURCES
+from .node_interface import float_range
 
 SUMMARY = """
 Publishes the robot's WiFi scans: every `period` seconds it reads a scan
@@ -24,10 +25,6 @@ TOPICS = (
 )
 
 
-def _floats(low, high):
-    return [FloatingPointRange(from_value=low, to_value=high)]
-
-
 #: (name, default, descriptor) of every parameter, in declaration order.
 PARAMETERS = (
     ('interface', '', ParameterDescriptor(
@@ -35,12 +32,12 @@ PARAMETERS = (
                     '/sys/class/net', read_only=True)),
     ('period', 2.0, ParameterDescriptor(
         description='seconds between scans', read_only=True,
-        floating_point_range=_floats(0.1, 3600.0))),
+        floating_point_range=float_range(0.1, 3600.0))),
     ('sources', ['iw', 'iw_dump', 'nmcli'], ParameterDescriptor(
         description=f'tried in order; any of {sorted(SOURCES)}',
         read_only=True)),
     ('max_age', 0.0, ParameterDescriptor(
         description='readings of APs last seen longer ago (s) are dropped; '
                     '0: period + the scan command\'s run time',
-        floating_point_range=_floats(0.0, 3600.0))),
+        floating_point_range=float_range(0.0, 3600.0))),
 )

@@ -116,12 +116,13 @@ def train(fp, config, log=print, validation=None):
     model = PlaceModel(fp.ap_ids, scaler,
                        [net.frozen_layers() for net in nets], classes,
                        provenance, position=position)
-    provenance['calibration'] = {'temperature': 1.0, 'fitted_on': NOT_FITTED}
     if validation is not None and nets:
-        provenance['calibration'] = calibrate(model, validation)
-        model.temperature = provenance['calibration']['temperature']
-        c = provenance['calibration']
+        c = provenance['calibration'] = calibrate(model, validation)
+        model.temperature = c['temperature']
         log(f'probabilities: temperature {c["temperature"]:.3f} fitted on '
             f'{c["scans"]} validation scans (expected calibration error '
             f'{c["ece_before"]:.4f} -> {c["ece_after"]:.4f})')
+    else:
+        provenance['calibration'] = {'temperature': 1.0,
+                                     'fitted_on': NOT_FITTED}
     return model, nets, report
