@@ -174,19 +174,25 @@ def plan(runs_per_kind, rng):
     """
     Return [(kind, phase, signals)], ``runs_per_kind`` runs per kind.
 
-    Every (phase, first signal, single or double) combination comes once,
-    in random order, before any comes again.
+    The phases take turns (in a random order per kind), so three runs of a
+    kind cover every phase; within a phase every (first signal, single or
+    double) combination comes once before any comes again, and any two runs
+    in a row of a phase include one double signal.
     """
-    combos = [(phase, sig, double) for phase in PHASES for sig in SIGNALS
-              for double in (False, True)]
     runs = []
     for kind in KINDS:
-        order = []
-        while len(order) < runs_per_kind:
-            order += rng.sample(combos, len(combos))
-        runs += [(kind, phase, [sig] + ([rng.choice(SIGNALS)] if double
-                                        else []))
-                 for phase, sig, double in order[:runs_per_kind]]
+        combos = {}
+        for phase in PHASES:
+            sigs = rng.sample(SIGNALS, len(SIGNALS))
+            doubles = rng.sample((False, True), 2)
+            combos[phase] = [(sigs[0], doubles[0]), (sigs[1], doubles[1]),
+                             (sigs[1], doubles[0]), (sigs[0], doubles[1])]
+        phases = rng.sample(PHASES, len(PHASES))
+        for i in range(runs_per_kind):
+            phase = phases[i % len(phases)]
+            sig, double = combos[phase][i // len(phases) % 4]
+            runs.append((kind, phase, [sig] + ([rng.choice(SIGNALS)]
+                                               if double else [])))
     return runs
 
 
