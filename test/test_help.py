@@ -59,9 +59,11 @@ def _flat(text):
     return ' '.join(text.split())
 
 
-def _command(executable, option, folder, last):
+def _command(executable, option, folder, last, module=False):
     """
     Return (argv, env): ``executable`` with ``option`` in ``folder``.
+
+    ``module``: run as ``python -m wifi_place_recognition.ros.<executable>``.
 
     Before (``last``) or after the option come the arguments that would
     start it for real (scanning with tools that leave a mark, recording
@@ -81,16 +83,18 @@ def _command(executable, option, folder, last):
     elif executable == 'record_fingerprints':
         args = ['--ros-args', '-p', f'output:={folder / "out" / "rec.csv"}',
                 '-p', 'building:=0', '-p', 'floor:=0']
-    return [str(BIN / executable)] + (
-        [*args, option] if last else [option, *args]), env
+    command = [sys.executable, '-m', f'wifi_place_recognition.ros.{executable}'
+               ] if module else [str(BIN / executable)]
+    return command + ([*args, option] if last else [option, *args]), env
 
 
+@pytest.mark.parametrize('module', [False, True], ids=['script', 'python-m'])
 @pytest.mark.parametrize('last', [False, True], ids=['first', 'last'])
 @pytest.mark.parametrize('option', ['--help', '-h'])
 @pytest.mark.parametrize('executable', sorted(TABLES))
 def test_a_node_executable_prints_its_interface_and_starts_nothing(
-        tmp_path, executable, option, last):
-    argv, env = _command(executable, option, tmp_path, last)
+        tmp_path, executable, option, last, module):
+    argv, env = _command(executable, option, tmp_path, last, module)
     try:
         result = run(argv, env=env, cwd=tmp_path, timeout=60)
     except subprocess.TimeoutExpired:

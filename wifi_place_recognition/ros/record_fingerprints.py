@@ -306,4 +306,6 @@ def main(args=None):
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    # As the executable: --help, and stop signals caught early.
+    from wifi_place_recognition.ros.executables import record_fingerprints as _run
+    sys.exit(_run())

@@ -155,4 +155,6 @@ def main(args=None):
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    # As the executable: --help, and stop signals caught early.
+    from wifi_place_recognition.ros.executables import wifi_scanner_node as _run
+    sys.exit(_run())
