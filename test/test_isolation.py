@@ -1,12 +1,15 @@
 """What stays apart: the core from ROS and torch, a test run from another."""
 
 import json
+import os
+from pathlib import Path
 import sys
 from xml.etree import ElementTree
 
 from conftest import DOMAIN_ID, REPO, run, TEST_DIR
 import numpy as np
 import pytest
+from ros_helpers import Client, NodeProcess
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.core.resources import default_model_path
@@ -88,3 +91,22 @@ def test_a_concurrent_run_cannot_take_this_runs_domain_id():
     assert int(result.stdout) != DOMAIN_ID
     assert result.returncode == 1
     assert 'held by another live test run' in result.stderr
+
+
+def test_a_running_node_leaves_the_message_code_generator_out(ros, tmp_path):
+    # rosidl_generator_py imports its code generator (lark, empy) if it can;
+    # the executables block it: 2.4 MiB of RSS a running node never uses.
+    env = dict(os.environ, PYTHONVERBOSE='1')    # every import on stderr
+    proc = NodeProcess(tmp_path, [str(Path(sys.executable).parent /
+                                      'classifier_node')], env=env)
+    model = load_model(default_model_path())
+    client = Client(ros)
+    try:
+        client.wait_ready(proc, (model.ap_ids[:6], [-60.0] * 6))
+        client.close()
+    finally:
+        code, log = proc.stop()
+    assert code == 0, log[-2000:]
+    assert "import 'rclpy'" in log and "import 'service_msgs'" in log
+    assert "import 'lark'" not in log
+    assert "import 'rosidl_generator_py.generate_py_impl'" not in log
