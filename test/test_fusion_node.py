@@ -211,11 +211,14 @@ def test_a_drive_with_odometry_gives_a_fused_pose_with_yaw(
 
 def test_a_lift_and_a_kidnap(ros, tmp_path, surveyed_model):
     with running_node(ros, tmp_path, surveyed_model, 'lift_node', '-p',
-                      f'frame_id:={FRAME}') as (client, proc, _):
+                      f'frame_id:={FRAME}', '-p',
+                      'initial_pose_on_change:=true') as (client, proc, _):
         drive = Drive(ros, client, 'lift_node')
         truth = square(laps=1)
         drive.drive(truth, odometry_of(truth))
         t, pose = truth[-1, 0], odometry_of(truth)[-1]
+        # the filter judges the scans' jumps: a lap gives no re-seed
+        assert not drive.initial, [p.header for p in drive.initial]
         # the lift: odometry stands still, the scans change floor
         frames = []
         for k in range(1, 5):
@@ -224,6 +227,10 @@ def test_a_lift_and_a_kidnap(ros, tmp_path, surveyed_model):
             values, fused = drive.scan(t + k, 8, 8, floor=1)
             frames.append(fused.header.frame_id)
         assert frames[1] == 'map_f1', frames
+        # re-seeded once, on the new floor, by the filter's start there
+        assert wait_until(lambda: drive.initial, 10, ros), 'no initialpose'
+        assert [(p.header.frame_id, p.header.stamp.sec)
+                for p in drive.initial] == [('map_f1', int(t) + 2)]
         # carried away: the scans come from 20 m off, odometry still
         t += 5
         near = []
@@ -238,6 +245,12 @@ def test_a_lift_and_a_kidnap(ros, tmp_path, surveyed_model):
         assert max(near[-5:]) < 6, near
         assert wait_until(lambda: int(health(client)['fusion_restarts']) >= 3,
                           10, ros), health(client)   # start, floor, kidnap
+        # the restart after the kidnap re-seeds where the robot now is
+        assert len(drive.initial) == 2, [p.header for p in drive.initial]
+        seeded = drive.initial[-1].pose.pose.position
+        assert drive.initial[-1].header.frame_id == 'map_f1'
+        assert math.hypot(seeded.x - (28 + ORIGIN[0]),
+                          seeded.y - (28 + ORIGIN[1])) < 6
 
 
 def test_odometry_faults_are_counted_and_never_followed(

@@ -12,7 +12,9 @@ request and, with ``initial_pose_on_change``, every confident one that
 changes the building/floor or whose position jumps (:mod:`.place_changes`).
 While odometry arrives on ``odom`` (``fusion``), ``~/pose`` is the pose
 fused with it, with a yaw, at every scan and in between
-(:mod:`.odometry_fusion`), and ``initialpose`` carries it.
+(:mod:`.odometry_fusion`), and ``initialpose`` carries it: after a change
+of floor, the filter's first pose there; instead of the scans' jumps, the
+filter's fresh starts on its floor.
 Inference is a numpy forward pass: torch is never imported. Each scan is
 processed in the subscription callback. The subscription keeps one scan
 (KEEP_LAST, depth 1): a scan that arrives while another is processed
@@ -122,7 +124,7 @@ class ClassifierNode(Node):
         self.create_timer(1.0, self._publish_health)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.pose_pub = self.initial_pose_pub = None
-        self._initial_pending = None    # (stamp s, reasons): fused, waiting
+        self._initial_pending = None    # (stamp s, reasons, place): fused
         if model.position is not None:
             self.pose_pub = self.create_publisher(
                 PoseWithCovarianceStamped, '~/pose', 10)
@@ -238,12 +240,13 @@ class ClassifierNode(Node):
         self.counts['answered'] += 1
         self._publish_answer(status, stamp)
         confident = status.level == DiagnosticStatus.OK
+        fusing = self.odometry is not None and self.odometry.active
         reasons = self.changes.follow(place, confident, stamp,
-                                      self._frame(place))
+                                      self._frame(place), jumps=not fusing)
         if place.position is None:
             return
         reasons = reasons if self.reseed_on_change else []
-        if self.odometry is not None and self.odometry.active:
+        if fusing:
             self._fuse(place, stamp, confident, reasons)
         else:
             self._publish_pose(place, stamp, confident, reasons)
@@ -272,32 +275,42 @@ class ClassifierNode(Node):
         Feed the scan's own position to the filter; initialpose waits.
 
         The filter follows the answer's place (the tracked one with
-        tracking), as ``~/place`` and ``~/current_place`` do.
+        tracking), as ``~/place`` and ``~/current_place`` do. A re-seed
+        waits for the first fused pose from this scan on in that place:
+        after a change of floor, the filter's start there (at the second
+        confident answer in a row), never the old floor's pose.
         """
         if confident and self._send_initial_pose:
             self._send_initial_pose = False
             reasons = reasons + ['requested']
         if reasons:
-            self._initial_pending = (stamp, reasons)
-        try:
-            self.odometry.scan(stamp, place.scan_position,
-                               (place.building, place.floor), confident)
-        except Exception as exc:  # never let one scan stop the node
-            self.counts['rejected/internal_error'] += 1
-            self.get_logger().error(f'fusion failed on a scan: {exc!r}',
-                                    throttle_duration_sec=THROTTLE_S)
+            self._initial_pending = (stamp_time(stamp, self.get_clock()),
+                                     reasons, (place.building, place.floor))
+        self.odometry.scan(stamp, place.scan_position,
+                           (place.building, place.floor), confident)
 
-    def _publish_fused(self, fused, stamp, place):
-        """Publish a fused pose; on initialpose too if one waits for it."""
+    def _publish_fused(self, fused, stamp, place, relocated):
+        """
+        Publish a fused pose; on initialpose too when a re-seed is due.
+
+        Due: the pending one (:meth:`_fuse`), or, with
+        ``initial_pose_on_change``, a ``relocated`` filter (it started
+        afresh on the floor it was on: the robot was carried away), which
+        with fusion stands for the scans' own jumps.
+        """
         frame = self.frame_id.format(building=place[0], floor=place[1])
         pose = pose_message(fused.xy, fused.cov, stamp, frame, fused.yaw)
         self.pose_pub.publish(pose)
-        waiting = self._initial_pending
-        if waiting is not None and waiting[0] == stamp:
-            self._initial_pending = None
+        waiting, reasons = self._initial_pending, None
+        if waiting is not None and fused.stamp >= waiting[0] and \
+                place == waiting[2]:
+            self._initial_pending, reasons = None, waiting[1]
+        elif relocated and self.reseed_on_change:
+            reasons = ['the fused pose started afresh']
+        if reasons:
             self.initial_pose_pub.publish(pose)
             self.get_logger().info(
-                f'initialpose sent ({"; ".join(waiting[1])}): building '
+                f'initialpose sent ({"; ".join(reasons)}): building '
                 f'{place[0]}, floor {place[1]}, x {fused.xy[0]:.2f}, y '
                 f'{fused.xy[1]:.2f}, yaw {math.degrees(fused.yaw):.0f} deg '
                 f'in {frame} (fused with odometry)')

@@ -86,7 +86,8 @@ PARAMETERS = (
     ('initial_pose_on_change', False, ParameterDescriptor(
         description='send every confident answer that changes the '
                     'building/floor, or whose position jumps, on '
-                    'initialpose')),
+                    'initialpose (with odometry fused: the filter\'s first '
+                    'pose on the new floor, or when it starts afresh)')),
     ('jump_threshold', 5.0, ParameterDescriptor(
         description='a jump: the tracked position moved more than this many '
                     'standard deviations of the previous answer\'s '

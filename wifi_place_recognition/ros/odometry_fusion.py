@@ -4,9 +4,11 @@ classifier_node's odometry input: :class:`.core.fusion.Fusion` on ROS.
 Subscribes ``odom`` (``nav_msgs/Odometry``, the pose in the robot's odom
 frame; sensor-data QoS with a deep queue) and feeds it, with each answered
 scan's position, to the filter in stamp order (a zero stamp means the
-time the node takes the message). Fused poses go to ``publish(fused)``:
-one per scan, stamped with the scan's stamp, and ``pose_rate`` times a
-second between scans while odometry moves on. A timer lets a scan that
+time the node takes the message). Fused poses go to ``publish(fused,
+stamp, place, relocated)``: one per scan, stamped with the scan's stamp,
+and ``pose_rate`` times a second between scans while odometry moves on;
+``relocated`` when the filter started afresh on the place it was on (the
+scans kept disagreeing with it, or WiFi alone for long). A timer lets a scan that
 waited ``odom_timeout`` seconds for odometry through alone. Odometry faults
 (:data:`.core.fusion.ODOMETRY_FAULTS`) are counted and logged (throttled);
 the health status is WARN while odometry is faulty or stale.
@@ -49,6 +51,7 @@ class OdometryFusion:
         self.fusion = Fusion(params, FusionLimits(odom_timeout=odom_timeout))
         self._last_problem = (None, -float('inf'))   # (what, monotonic s)
         self._published_stamp = None
+        self._place = None     # of the last pose published
         self._stamps = {}   # float stamp -> the message's, to publish it
         self._odometry_stamp = (None, None)
         self._odometry_arrival = -math.inf   # monotonic s, last good one
@@ -92,9 +95,17 @@ class OdometryFusion:
         """Forget the filter and odometry: the next scan starts afresh."""
         self.fusion.reset()
         self._stamps.clear()
+        self._place = None
 
     def scan(self, stamp, xy, place, confident):
         """Feed the answer to one scan; publish the poses it releases."""
+        try:
+            self._scan(stamp, xy, place, confident)
+        except Exception as exc:   # never let one scan stop the node
+            self.counts_internal += 1
+            self._problem(f'internal error on a scan: {exc!r}')
+
+    def _scan(self, stamp, xy, place, confident):
         seconds = stamp_time(stamp, self._node.get_clock())
         now = time.monotonic()
         timeout = self.fusion.limits.odom_timeout
@@ -172,7 +183,10 @@ class OdometryFusion:
                 if seconds != pose.stamp:
                     continue
             self._published_stamp = pose.stamp
-            self._publish(pose, stamp, self.fusion.place)
+            place = self.fusion.place
+            self._publish(pose, stamp, place,
+                          pose.restarted and place == self._place)
+            self._place = place
 
     def _problem(self, what):
         self._last_problem = (what, time.monotonic())

@@ -34,14 +34,15 @@ class PlaceChanges:
         self.publisher = node.create_publisher(
             DiagnosticArray, '~/current_place', CURRENT_PLACE_QOS)
 
-    def follow(self, place, confident, stamp, frame):
+    def follow(self, place, confident, stamp, frame, jumps=True):
         """
         Take one answer; return why to re-seed the localiser (a list).
 
         ``confident``: the answer is OK (not WARN); ``frame``: its pose's
         frame. A jump is a position more than ``jump_threshold`` standard
-        deviations from the previous answer's on the same floor. Only a
-        confident answer changes the place or gives reasons.
+        deviations from the previous answer's on the same floor (not a
+        reason with ``jumps`` False: the odometry fusion judges those).
+        Only a confident answer changes the place or gives reasons.
         """
         key = (place.building, place.floor)
         reasons = []
@@ -49,7 +50,7 @@ class PlaceChanges:
             last = self._last_position
             if last is not None and last[0] == key:
                 sigmas = step_sigmas(last[1], last[2], place.position)
-                if sigmas > self.jump_threshold:
+                if jumps and sigmas > self.jump_threshold:
                     reasons.append(f'position jumped {sigmas:.1f} sigma')
             self._last_position = (key, place.position, place.position_cov)
         if not confident:
