@@ -10,8 +10,9 @@ with the model's fusion parameters: fitted, and the defaults (drift not
 fitted). Started with no prior (the first scan, every heading); seeds
 0, 1, 2 of the filter. Also: a kidnapped robot (two runs spliced, the
 odometry continuous, the true position jumping) and the recovery time.
-Table on stdout, JSON in ``benchmarks/results/fusion.json``, and a
-trajectory picture per building (``--figures``).
+Table on stdout, JSON in ``benchmarks/results/fusion.json`` (with one
+run's trajectories per building, seed 0, which ``benchmarks/figures.py``
+draws).
 
     python benchmarks/fusion.py [--data ../shared/datasets/robot]
 """
