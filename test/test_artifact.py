@@ -112,10 +112,22 @@ def test_failed_write_keeps_the_previous_file(synthetic, tmp_path,
         f.write(b'PK partial')
         raise OSError(28, 'No space left on device')
     monkeypatch.setattr(np, 'savez_compressed', disk_full)
-    with pytest.raises(OSError):
-        save_model(model, path)
+    with pytest.raises(OSError, match=f'No space left on device: .{path}'):
+        save_model(model, path)     # named after the file, not its temporary
     assert path.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == ['m.npz']
+
+
+@pytest.mark.parametrize('where', ['no folder', 'a folder'])
+def test_an_unwritable_path_is_named_and_nothing_is_left(synthetic, tmp_path,
+                                                         where):
+    model = load_model(synthetic[1])
+    path = tmp_path / 'missing' / 'm.npz' if where == 'no folder' \
+        else tmp_path
+    with pytest.raises(OSError) as err:
+        save_model(model, path)
+    assert err.value.filename == str(path)
+    assert not any(p.name.endswith('.tmp') for p in tmp_path.iterdir())
 
 
 def test_a_model_file_carries_its_temperature(synthetic, tmp_path):

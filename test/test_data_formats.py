@@ -14,6 +14,7 @@ from wifi_place_recognition.core.scan import ScanMapper
 from wifi_place_recognition.data.fingerprints import (
     DataError, Fingerprints, parse_fingerprints, read_fingerprints,
     ReaderOptions)
+from wifi_place_recognition.data.poses import read_poses
 
 WIFINE = Path(os.environ.get('WIFI_PR_WIFINE',
                              REPO.parent / 'shared' / 'datasets' / 'wifine'))
@@ -372,6 +373,28 @@ def test_robot_run_rows_without_a_pose_are_left_out_and_yaw_is_no_ap():
                         '(rows 2)']
     with pytest.raises(DataError, match="row 3, column Y: value '' is not"):
         parse(text.replace('1.25,-2.5', '1.25,'))
+    assert fp.meta['YAW'].dtype == np.float64
+    # a position or heading that is no finite number, or not in radians
+    for old, new, message in [
+            ('1.25,-2.5', 'nan,-2.5', "row 3, column X: value 'nan' is not "
+                                      "a finite number"),
+            ('1.25,-2.5', '1.25,inf', "row 3, column Y: value 'inf'"),
+            ('1.25,-2.5', '1e999,-2.5', "row 3, column X: value '1e999'"),
+            ('-2.9,-61', '172,-61', 'row 3, column YAW: value 172 is '
+                                    'beyond'),
+            ('-2.9,-61', 'abc,-61', "row 3, column YAW: value 'abc' is "
+                                    "not a number"),
+            ('-2.9,-61', ',-61', "row 3, column YAW: value '' is not")]:
+        with pytest.raises(DataError, match=message):
+            parse(text.replace(old, new))
+
+
+def test_a_pose_file_with_a_column_twice_is_refused(tmp_path):
+    for header in ('TIMESTAMP,X,Y,YAW,yaw', 'TIMESTAMP,X,X,Y,YAW'):
+        path = tmp_path / 'odom.csv'
+        path.write_text(header + '\n' + ','.join(['1'] * 5) + '\n')
+        with pytest.raises(DataError, match=r'columns \d and \d are both'):
+            read_poses(path)
 
 
 # the real WiFine folders and the command line ----------------------------------

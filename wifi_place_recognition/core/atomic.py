@@ -1,9 +1,14 @@
 """Atomic file writes: readers see the old file or the new one, never a torn one."""
 
 import contextlib
+import errno
 import os
 import tempfile
 from pathlib import Path
+
+
+#: Errors of writing the file itself (no name of their own): named after it.
+WRITE_ERRORS = (errno.EFBIG, errno.ENOSPC, errno.EDQUOT, errno.EIO)
 
 
 def _umask():
@@ -19,19 +24,32 @@ def atomic_write(path, mode='wb', **kwargs):
 
     On any exception, or if the process dies, ``path`` keeps its previous
     content and the temporary file is removed (or left as ``.<name>.*.tmp``
-    after a kill).
+    after a kill). An OSError of the write names ``path``, not the
+    temporary file.
     """
     path = Path(path)
     folder = path.parent
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=f'.{path.name}.',
-                               suffix='.tmp')
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f'.{path.name}.',
+                                   suffix='.tmp')
+    except OSError as exc:      # no folder, not a folder, no permission
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
     try:
         os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, mode, **kwargs) as f:
-            yield f
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
+            try:
+                yield f
+                f.flush()
+                os.fsync(f.fileno())
+            except OSError as exc:
+                if exc.filename is not None or \
+                        exc.errno not in WRITE_ERRORS:
+                    raise
+                raise OSError(exc.errno, exc.strerror, str(path)) from None
+        try:
+            os.replace(tmp, path)
+        except OSError as exc:  # e.g. path is a folder
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

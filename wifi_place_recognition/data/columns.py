@@ -35,8 +35,8 @@ META_COLUMNS = ('LONGITUDE', 'LATITUDE', 'FLOOR', 'BUILDINGID', 'SPACEID',
                 'YAW')
 #: Position columns looked for, in this order, unless named.
 POSITION_PAIRS = (('LONGITUDE', 'LATITUDE'), ('X', 'Y'))
-#: ``Fingerprints.meta`` keys of the device and time columns.
-DEVICE, TIME = 'PHONEID', 'TIMESTAMP'
+#: ``Fingerprints.meta`` keys of the device, time and heading columns.
+DEVICE, TIME, YAW = 'PHONEID', 'TIMESTAMP', 'YAW'
 NOT_DETECTED_MARKER = 100.0
 
 

@@ -23,7 +23,7 @@ from ..core.metrics import class_index
 from ..core.rssi import clip_plausible, RssiError
 from ..core.scan import ScanMapper
 from .columns import (ap_columns, DEVICE, distinct_aps, few, FileColumns,
-                      markers, TIME)
+                      markers, TIME, YAW)
 from .files import DataError, decode, digest, input_files
 
 #: A class with fewer scans than this fraction of the median other class
@@ -177,6 +177,21 @@ def _assemble(tables, walks, source, sha256, options):
     return fp
 
 
+def _yaw(cells, j, unplaced):
+    """
+    Return the heading (rad) of the placed rows, or fail naming the cell.
+
+    A heading beyond +-2 pi is not in radians (degrees, or garbage).
+    """
+    yaw = cells.numeric(j, skip=unplaced)
+    beyond = np.abs(np.nan_to_num(yaw)) > 2 * np.pi
+    if beyond.any():
+        r = int(np.argmax(beyond))
+        cells.fail(r, j, f'value {yaw[r]:g} is beyond +-2 pi (a heading in '
+                   f'radians)')
+    return yaw
+
+
 def _finish(t, ap_names, not_detected, source, notes):
     """Return one file's :class:`Fingerprints` (AP columns of its own)."""
     cells = t.table
@@ -220,6 +235,8 @@ def _finish(t, ap_names, not_detected, source, notes):
         position = np.stack([cells.numeric(j, skip=unplaced)
                              for j in t.position], axis=1)
         position_columns = tuple(t.header[j] for j in t.position)
+        if YAW in meta:
+            meta[YAW] = _yaw(cells, t.header.index(YAW), unplaced)
     building = np.zeros(len(cells.lines), np.int64) if t.building is None \
         else cells.label(t.building)
     fp = Fingerprints(ids, rssi.astype(np.float32), building,

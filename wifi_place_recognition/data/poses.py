@@ -23,8 +23,8 @@ def read_poses(path):
     Return the poses of a CSV: float64 (n, 4) rows of stamp, x, y, yaw.
 
     Raises :class:`DataError` naming the file, row and column of a missing
-    column, a value that is not a finite number, or a stamp earlier than
-    the row before (equal stamps are kept).
+    or repeated column (case ignored), a value that is not a finite number,
+    or a stamp earlier than the row before (equal stamps are kept).
     """
     try:
         with open(path, 'rb') as f:
@@ -33,7 +33,12 @@ def read_poses(path):
         raise DataError(f'{path}: cannot read ({exc.strerror})') from None
     rows = csv.reader(io.StringIO(decode(raw, path)))
     header = [h.strip() for h in next(rows, [])]
-    index = {h.upper(): j for j, h in enumerate(header)}
+    index = {}
+    for j, h in enumerate(header):
+        if h.upper() in index:
+            raise DataError(f'{path}: columns {index[h.upper()] + 1} and '
+                            f'{j + 1} are both {h.upper()} (case ignored)')
+        index[h.upper()] = j
     missing = [c for c in POSE_COLUMNS if c not in index]
     if missing:
         raise DataError(f'{path}: no column(s) {", ".join(missing)} (a pose '

@@ -61,20 +61,22 @@ class Table:
         Rows of the mask ``skip`` are not read: NaN.
         """
         skip = np.zeros(len(self.lines), bool) if skip is None else skip
-        if j in self.texts:
-            cells = self.texts[j]
+        cells = self.texts.get(j)
+        if cells is not None:
             bad = next((r for r, c in enumerate(cells)
                         if not skip[r] and not is_number(c)), None)
             if bad is not None:
                 self.fail(bad, j, f'value {cells[bad]!r} is not a number')
-            return np.array([math.nan if s else float(c)
-                             for c, s in zip(cells, skip)])
-        values = np.where(skip, math.nan, self.numbers[:, j])
+            values = np.array([math.nan if s else float(c)
+                               for c, s in zip(cells, skip)])
+        else:
+            values = np.where(skip, math.nan, self.numbers[:, j])
         bad = ~(np.isfinite(values) | skip)
-        if bad.any():
+        if bad.any():       # 'nan', 'inf', or beyond float64
             r = int(np.argmax(bad))
-            self.fail(r, j, f'value {values[r]:g} is not a finite number')
-        return values.copy()
+            shown = repr(cells[r]) if cells is not None else f'{values[r]:g}'
+            self.fail(r, j, f'value {shown} is not a finite number')
+        return values
 
     def label(self, j):
         """Return a label column as int64, or fail naming the bad cell."""
