@@ -19,7 +19,8 @@ from wifi_place_recognition.core.artifact import (_digest, load_model,
 from wifi_place_recognition.core.fusion import Fusion, FusionLimits
 from wifi_place_recognition.core.odometry_fit import FitError, fit_odometry
 from wifi_place_recognition.core.particles import FusionParams, wrap
-from wifi_place_recognition.core.trajectory import fuse_offline, score
+from wifi_place_recognition.core.trajectory import (dead_reckoning,
+                                                    fuse_offline, score)
 from wifi_place_recognition.data.files import DataError
 from wifi_place_recognition.data.poses import read_poses
 
@@ -236,6 +237,88 @@ def test_fit_odometry_finds_the_drift():
     with pytest.raises(FitError, match='finite'):
         fit_odometry(np.full((5, 4), np.nan), truth[at, 0], truth[at, 1:3],
                      truth[at, 3])
+
+
+def turning(n=3000, drift=math.radians(1.4), turn_at=(100.0, 130.0)):
+    """
+    Return (truth, odometry) of a drive at 0.5 m/s, 10 Hz, that turns.
+
+    The truth turns 270 degrees between ``turn_at`` seconds; the odometry
+    starts at 0, 0 with another heading and loses ``drift`` rad per metre.
+    """
+    t = np.arange(n) * 0.1
+    rate = np.where((t > turn_at[0]) & (t <= turn_at[1]),
+                    1.5 * math.pi / (turn_at[1] - turn_at[0]), 0.0)
+    yaw = np.cumsum(rate * 0.1)
+    odo_yaw = yaw + 0.3 - drift * 0.05 * np.arange(n)
+
+    def path(heading):
+        return np.concatenate([[0.0], np.cumsum(0.05 * heading[1:])])
+    truth = np.column_stack([t, path(np.cos(yaw)), path(np.sin(yaw)),
+                             wrap(yaw)])
+    odo = np.column_stack([t, path(np.cos(odo_yaw)), path(np.sin(odo_yaw)),
+                           wrap(odo_yaw)])
+    return truth, odo
+
+
+def test_fit_odometry_leaves_out_the_stretches_across_an_odometry_gap():
+    truth, odo = turning()
+    at = np.arange(0, len(truth), 10)
+    whole = fit_odometry(odo, truth[at, 0], truth[at, 1:3], truth[at, 3])[1]
+    assert whole['drift_deg_per_m'] == pytest.approx(1.4, abs=0.05)
+    # 40 s of odometry lost while the robot turns 270 degrees
+    lost = odo[(odo[:, 0] < 95.0) | (odo[:, 0] > 135.0)]
+    params, report = fit_odometry(lost, truth[at, 0], truth[at, 1:3],
+                                  truth[at, 3])
+    assert report['drift_deg_per_m'] == pytest.approx(1.4, abs=0.05)
+    assert whole['windows_across_odometry_gaps'] == 0
+    assert report['windows_across_odometry_gaps'] == 7   # 20 m: 7 of 3 m
+    assert report['windows'] == whole['windows'] - 7 == params.fit['windows']
+    assert report['odometry_distance_ratio'] == pytest.approx(1.0, abs=1e-3)
+    # a gap up to the node's odom_timeout (1 s) is bridged
+    short = odo[(odo[:, 0] < 99.95) | (odo[:, 0] > 100.85)]
+    assert fit_odometry(short, truth[at, 0], truth[at, 1:3],
+                        truth[at, 3])[1]['windows_across_odometry_gaps'] == 0
+
+
+def test_fit_errors_name_the_files_and_both_time_spans():
+    truth, odo = turning(n=600)
+    at = np.arange(0, 600, 10)
+    names = ('run/scans.csv', 'run/odom.csv')
+    restamped = odo.copy()
+    restamped[:, 0] += 1000.0
+    with pytest.raises(FitError) as error:
+        fit_odometry(restamped, truth[at, 0], truth[at, 1:3], truth[at, 3],
+                     names=names)
+    assert str(error.value) == (
+        "run/scans.csv: the run covers 0.0 m with a true pose inside the "
+        "odometry's time span: run/odom.csv spans 1000.000 to 1059.900 s "
+        "(59.9 s), the posed scans 0.000 to 59.000 s (59.0 s), 60 of them "
+        "outside; fitting needs 3 stretches of 3 m")
+    with pytest.raises(FitError, match='^run/odom.csv: need two or more'):
+        fit_odometry(odo[:1], truth[at, 0], truth[at, 1:3], truth[at, 3],
+                     names=names)
+    gapped = odo[(odo[:, 0] < 10.0) | (odo[:, 0] > 50.0)]
+    with pytest.raises(FitError, match='8 stretch.es. across an odometry '
+                                       'gap longer than 1 s left out'):
+        fit_odometry(gapped, truth[at, 0], truth[at, 1:3], truth[at, 3],
+                     names=names)
+
+
+def test_odometry_alone_is_nan_outside_the_odometry_and_starts_inside():
+    truth, odo = straight(n=600)
+    stamps = truth[::10, 0]
+    middle = odo[(odo[:, 0] >= 20.0) & (odo[:, 0] <= 40.0)]
+    first = int(np.searchsorted(stamps, 20.0))
+    xy, yaw = dead_reckoning(middle, stamps, truth[first * 10, 1:3],
+                             truth[first * 10, 3], stamps[first])
+    inside = (stamps >= 20.0) & (stamps <= 40.0)
+    assert np.isnan(xy[~inside]).all() and np.isnan(yaw[~inside]).all()
+    np.testing.assert_allclose(xy[inside], truth[::10][inside, 1:3],
+                               atol=1e-6)
+    with pytest.raises(ValueError, match='outside the odometry.s time span '
+                                         '20.000 to 40.000 s'):
+        dead_reckoning(middle, stamps, truth[0, 1:3], truth[0, 3], stamps[0])
 
 
 def test_pose_files_name_what_is_wrong(tmp_path):

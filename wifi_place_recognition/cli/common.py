@@ -4,6 +4,7 @@ from dataclasses import dataclass, field, replace
 import functools
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 from ..core.artifact import ModelFileError
@@ -146,6 +147,54 @@ def read_data(given, options, what, role='train', small_classes=None):
     for note in fp.notes:
         print(f'note: {note}', file=sys.stderr, flush=True)
     return fp
+
+
+def same_file(a, b):
+    """Whether paths ``a`` and ``b`` name one file (links, ``..`` resolved)."""
+    a, b = Path(a), Path(b)
+    try:
+        if a.exists() and b.exists():
+            return a.samefile(b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def check_outputs(outputs, inputs=()):
+    """
+    Refuse, before any work, an output that cannot or must not be written.
+
+    ``outputs``, ``inputs``: (option, path) pairs; None paths are left
+    out. Raise ValueError naming the option and path of an output that is
+    the file of an input (given by another option: ``--model`` rewritten
+    in place is allowed) or of another output, that is a folder, or whose
+    folder is missing or takes no new file.
+    """
+    outputs = [(o, Path(p)) for o, p in outputs if p is not None]
+    inputs = [(o, Path(p)) for o, p in inputs if p is not None]
+    for k, (option, path) in enumerate(outputs):
+        for other, given in inputs:
+            if other != option and same_file(path, given):
+                raise ValueError(f'{option} {path} is the input {other} '
+                                 f'{given}: writing it would destroy the '
+                                 f'input; write elsewhere')
+        for other, given in outputs[:k]:
+            if same_file(path, given):
+                raise ValueError(f'{option} {path} is also {other} '
+                                 f'{given}: two outputs in one file')
+        if path.is_dir():
+            raise ValueError(f'{option} {path}: is a folder, not a file')
+        folder = path.parent
+        if not folder.is_dir():
+            raise ValueError(f'{option} {path}: no folder {folder}')
+        try:
+            fd, probe = tempfile.mkstemp(dir=folder, prefix=f'.{path.name}.',
+                                         suffix='.probe')
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as exc:
+            raise ValueError(f'{option} {path}: cannot write in the folder '
+                             f'{folder} ({exc.strerror or exc})') from None
 
 
 def main_wrapper(main):

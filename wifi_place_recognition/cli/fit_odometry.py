@@ -11,8 +11,9 @@ from ..core.atomic import atomic_write
 from ..core.odometry_fit import fit_odometry
 from ..core.particles import FusionParams
 from ..data.poses import read_poses
-from .common import (add_data_arguments, add_model_arguments, data_options,
-                     main_wrapper, read_data)
+from .common import (add_data_arguments, add_model_arguments,
+                     check_outputs, data_options, main_wrapper, read_data,
+                     same_file)
 
 
 @main_wrapper
@@ -42,6 +43,12 @@ def main(argv=None):
     args = p.parse_args(argv)
     if not args.window > 0:
         p.error('--window must be > 0')
+    in_place = args.output is None or same_file(args.output, args.model)
+    out = args.model if in_place else args.output
+    check_outputs([('--model' if in_place else '-o', out),
+                   ('--report', args.report)],
+                  [('--data', d) for d in args.data] +
+                  [('--odometry', args.odometry), ('--model', args.model)])
     model = load_model(args.model)
     if model.position is None:
         raise ValueError(f'{args.model}: the model has no position output; '
@@ -55,24 +62,29 @@ def main(argv=None):
     params, report = fit_odometry(
         odometry, fp.meta['TIMESTAMP'], fp.position,
         fp.meta['YAW'].astype(float), model.fusion or FusionParams(),
-        args.window)
+        args.window, (fp.source, str(args.odometry)))
     report.update(run=fp.source, run_sha256=fp.sha256,
                   odometry=str(args.odometry),
                   created=time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()))
     params.fit.update(report)
     model.fusion = params
-    out = args.output or args.model
+    if args.report:
+        with atomic_write(args.report, 'w') as f:
+            json.dump(report, f, indent=1)
     save_model(model, out)
-    print(f'{fp.source}: {report["scans"]} posed scans, '
-          f'{report["distance_m"]:.1f} m driven in {report["windows"]} '
-          f'stretches; odometry distance / true distance '
+    print(f'{fp.source}: {report["scans"]} posed scans inside the '
+          f'odometry\'s time span ({report["scans_outside_odometry"]} '
+          f'outside), {report["distance_m"]:.1f} m driven in '
+          f'{report["windows"]} stretches '
+          f'({report["windows_across_odometry_gaps"]} more across an '
+          f'odometry gap longer than {report["odometry_gap_limit_s"]:g} s '
+          f'left out); odometry distance / true distance '
           f'{report["odometry_distance_ratio"]:.4f}')
     print(f'heading drift {report["drift_deg_per_m"]:+.3f} deg/m '
           f'(+- {report["drift_sd_deg_per_m"]:.3f}; stretches spread '
           f'{report["window_drift_deg_per_m_sd"]:.2f})')
     if args.report:
-        with atomic_write(args.report, 'w') as f:
-            json.dump(report, f, indent=1)
+        print(f'wrote {args.report}')
     print(f'wrote {out}')
     return 0
 

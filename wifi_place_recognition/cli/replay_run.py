@@ -12,12 +12,15 @@ from rclpy.executors import ExternalShutdownException
 from ..core.atomic import atomic_write
 from ..core.trajectory import dead_reckoning, score, truth_at
 from ..data.poses import read_poses
-from ..ros.run_replayer import arrays, replay_run, RunReplayOptions
-from .common import add_data_arguments, data_options, main_wrapper, read_data
+from ..ros.run_replayer import (arrays, check_spans, replay_run,
+                                RunReplayOptions)
+from .common import (add_data_arguments, check_outputs, data_options,
+                     main_wrapper, read_data)
 
 #: What each column of the printed table is.
 WHO = (('single', 'each scan alone'),
-       ('odometry', 'odometry alone from the first true pose'),
+       ('odometry', 'odometry alone from the first true pose in its '
+                    'time span'),
        ('fused', 'the node\'s ~/pose'))
 ROWS = (('mean_m', 'mean error (m)'), ('median_m', 'median error (m)'),
         ('p95_m', 'p95 error (m)'), ('max_m', 'max error (m)'),
@@ -58,6 +61,14 @@ def main(argv=None):
                         'and fused pose')
     add_data_arguments(p)
     args, ros_args = p.parse_known_args(argv)
+    try:
+        options = RunReplayOptions(args.place_topic, args.pose_topic,
+                                   args.speed, args.wait)
+    except ValueError as exc:
+        p.error(f'--{exc}')     # the message starts with the option's name
+    check_outputs([('--json', args.json), ('--trajectory', args.trajectory)],
+                  [('--data', d) for d in args.data] +
+                  [('--odometry', args.odometry), ('--truth', args.truth)])
     fp = read_data(args.data, data_options(args), 'run', role='test')
     if 'TIMESTAMP' not in fp.meta:
         p.error(f'{fp.source} has no TIMESTAMP column')
@@ -67,11 +78,8 @@ def main(argv=None):
     if not np.isfinite(truth[0]).all(axis=1).any():
         raise ValueError(f'{args.truth or fp.source}: no true pose within '
                          f'the time span of the scans of {fp.source}')
-    try:
-        options = RunReplayOptions(args.place_topic, args.pose_topic,
-                                   args.speed, args.wait)
-    except ValueError as exc:
-        p.error(f'--speed: {exc}')
+    check_spans(fp.meta['TIMESTAMP'], odometry[:, 0], options.speed,
+                (fp.source, args.odometry))
     rclpy.init(args=ros_args)
     node = rclpy.create_node('run_replayer')
     try:
@@ -90,6 +98,11 @@ def main(argv=None):
     print(f'{fp.source}: {answered}/{len(fp)} scans answered, '
           f'{sum(pose is not None for _, pose in results.values())} with a '
           f'pose; odometry {args.odometry}')
+    n = scores['scans']
+    print(f'scored {n["with_true_pose"]} of {n["total"]} scans '
+          f'({n["without_true_pose"]} without a true pose); odometry alone '
+          f'{n["with_true_pose"] - n["outside_odometry"]} of them '
+          f'({n["outside_odometry"]} outside the odometry\'s time span)')
     print(f'{"":26s}' + ''.join(f'{who:>10s}' for who, _ in WHO))
     for key, name in ROWS:
         cells = [scores[who].get(key) for who, _ in WHO]
@@ -118,12 +131,19 @@ def scored(fp, odometry, truth, results):
     stamps = fp.meta['TIMESTAMP']
     true_xy, true_yaw = truth
     single, xy, yaw, cov = arrays(results, len(fp))
-    first = int(np.flatnonzero(np.isfinite(true_xy).all(axis=1))[0])
-    odo_xy, odo_yaw = dead_reckoning(odometry, stamps, true_xy[first],
-                                     true_yaw[first], stamps[first])
+    posed = np.isfinite(true_xy).all(axis=1)
+    inside = posed & (stamps >= odometry[0, 0]) & (stamps <= odometry[-1, 0])
+    odo_xy, odo_yaw = np.full((len(fp), 2), np.nan), np.full(len(fp), np.nan)
+    if inside.any():
+        first = np.flatnonzero(inside)[np.argmin(stamps[inside])]
+        odo_xy, odo_yaw = dead_reckoning(odometry, stamps, true_xy[first],
+                                         true_yaw[first], stamps[first])
     scores = {'single': score(stamps, true_xy, single),
               'odometry': score(stamps, true_xy, odo_xy, true_yaw, odo_yaw),
-              'fused': score(stamps, true_xy, xy, true_yaw, yaw, cov)}
+              'fused': score(stamps, true_xy, xy, true_yaw, yaw, cov),
+              'scans': {'total': len(fp), 'with_true_pose': int(posed.sum()),
+                        'without_true_pose': int((~posed).sum()),
+                        'outside_odometry': int((posed & ~inside).sum())}}
     table = np.column_stack([stamps, true_xy, true_yaw, single, odo_xy,
                              odo_yaw, xy, yaw])
     return scores, table

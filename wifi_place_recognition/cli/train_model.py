@@ -8,7 +8,8 @@ from ..core.artifact import save_model
 from ..core.evaluation import evaluate
 from ..training.config import TrainConfig
 from .common import (add_data_arguments, add_download_arguments,
-                     data_options, main_wrapper, print_report, read_data)
+                     check_outputs, data_options, main_wrapper, print_report,
+                     read_data)
 
 
 def _layers(text):
@@ -61,6 +62,9 @@ def build_parser():
 def main(argv=None):
     """Train, save, summarise; exit 2 with a message on bad input."""
     args = build_parser().parse_args(argv)
+    check_outputs([('-o', args.output)], [
+        (option, path) for option in ('--data', '--validation', '--test')
+        for path in getattr(args, option[2:]) or ()])
     config = TrainConfig(**{f.name: getattr(args, f.name)
                             for f in fields(TrainConfig)})
     data = data_options(args)

@@ -8,6 +8,9 @@ metres of travel, the true turn minus the odometry's turn, per metre, is
 the odometry's heading drift (wheel odometry often loses a steady angle per
 metre); :func:`fit_odometry` returns :class:`.particles.FusionParams` with
 that drift as the filter's prior, and a report of what it measured.
+A stretch across a gap in the odometry longer than the node's
+``odom_timeout`` (the node does not bridge such a gap either) is left out
+and counted: the odometry's turn over the gap is unknown.
 """
 
 from dataclasses import replace
@@ -15,60 +18,85 @@ import math
 
 import numpy as np
 
+from .fusion import FusionLimits
 from .particles import FusionParams
+from .trajectory import time_span
 
 #: The least spread given to a fitted drift (rad per m).
 MIN_DRIFT_SD = 0.005
 #: Stretches needed for a fit.
 MIN_WINDOWS = 3
+#: The longest odometry gap a stretch may span (s): the node's own limit.
+MAX_GAP_S = FusionLimits().odom_timeout
 
 
 class FitError(ValueError):
     """A run that cannot fit the odometry; the message says why."""
 
 
-def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0):
+def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
+                 names=('the scans', 'the odometry')):
     """
     Return (params, report): ``params`` with the odometry's drift fitted.
 
     ``odometry``: (m, 4) rows of stamp, x, y, yaw in time order;
     ``stamps``, ``xy``, ``yaw``: the true poses (rows with NaN are left
-    out). ``drift_mean`` becomes the total true-minus-odometry turn over
-    the distance driven, ``drift_sd`` its standard error over the
-    stretches (at least :data:`MIN_DRIFT_SD`).
+    out, and counted when outside the odometry's time span); ``names``:
+    of the scans and the odometry, for messages. ``drift_mean`` becomes
+    the total true-minus-odometry turn over the distance driven in the
+    stretches that span no odometry gap longer than :data:`MAX_GAP_S`,
+    ``drift_sd`` its standard error over them (at least
+    :data:`MIN_DRIFT_SD`).
     """
     params = params or FusionParams()
+    run, odometry_name = names
     odometry = np.asarray(odometry, np.float64)
     if odometry.ndim != 2 or odometry.shape[1] != 4 or \
             not np.isfinite(odometry).all():
-        raise FitError('odometry: expected rows of finite stamp, x, y, yaw')
+        raise FitError(f'{odometry_name}: expected rows of finite stamp, x, '
+                       f'y, yaw')
     if len(odometry) < 2 or (np.diff(odometry[:, 0]) < 0).any():
-        raise FitError('odometry: need two or more poses in time order')
+        raise FitError(f'{odometry_name}: need two or more poses in time '
+                       f'order')
     stamps = np.asarray(stamps, np.float64)
-    ok = np.isfinite(stamps) & np.isfinite(xy).all(axis=1) & \
-        np.isfinite(yaw) & (stamps >= odometry[0, 0]) & \
-        (stamps <= odometry[-1, 0])
-    order = np.argsort(stamps[ok], kind='stable')    # rows in time order
-    stamps, xy = stamps[ok][order], np.asarray(xy)[ok][order]
-    yaw = np.asarray(yaw)[ok][order]
+    xy, yaw = np.asarray(xy, np.float64), np.asarray(yaw, np.float64)
     t = odometry[:, 0]
+    posed = np.isfinite(stamps) & np.isfinite(xy).all(axis=1) & \
+        np.isfinite(yaw)
+    ok = posed & (stamps >= t[0]) & (stamps <= t[-1])
+    outside = int(posed.sum() - ok.sum())
+    spans = (f'{odometry_name} spans {time_span(t)}, the posed scans '
+             f'{time_span(stamps[posed])}, {outside} of them outside')
+    order = np.argsort(stamps[ok], kind='stable')    # rows in time order
+    stamps, xy, yaw = stamps[ok][order], xy[ok][order], yaw[ok][order]
+    gaps = np.flatnonzero(np.diff(t) > MAX_GAP_S)
+
+    def across(lo, hi):     # from stamps lo to hi across an odometry gap
+        return ((lo[:, None] < t[gaps + 1]) &
+                (hi[:, None] > t[gaps])).any(axis=1)
     odo_yaw = np.interp(stamps, t, np.unwrap(odometry[:, 3]))
     odo_xy = np.column_stack([np.interp(stamps, t, odometry[:, 1]),
                               np.interp(stamps, t, odometry[:, 2])])
     true_yaw = np.unwrap(yaw)
-    travelled = np.concatenate(
-        [[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
-    odo_travelled = np.concatenate(
-        [[0.0], np.cumsum(np.linalg.norm(np.diff(odo_xy, axis=0), axis=1))])
+    steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    travelled = np.concatenate([[0.0], np.cumsum(steps)])
+    bridged = across(stamps[:-1], stamps[1:])
+    odo_steps = np.linalg.norm(np.diff(odo_xy, axis=0), axis=1)
     edges = [0]
     for i in range(1, len(stamps)):
         if travelled[i] - travelled[edges[-1]] >= window_m:
             edges.append(i)
-    if len(edges) - 1 < MIN_WINDOWS:
-        raise FitError(f'the run covers {travelled[-1]:.1f} m with a true '
-                       f'pose inside the odometry\'s time span: fitting '
-                       f'needs {MIN_WINDOWS} stretches of {window_m:g} m')
-    a, b = np.array(edges[:-1]), np.array(edges[1:])
+    a, b = np.array(edges[:-1], int), np.array(edges[1:], int)
+    kept = ~across(stamps[a], stamps[b])
+    skipped = int(len(a) - kept.sum())
+    if kept.sum() < MIN_WINDOWS:
+        gap_note = f'{skipped} stretch(es) across an odometry gap longer ' \
+            f'than {MAX_GAP_S:g} s left out; ' if skipped else ''
+        raise FitError(f'{run}: the run covers {travelled[-1]:.1f} m with '
+                       f'a true pose inside the odometry\'s time span: '
+                       f'{spans}; {gap_note}fitting needs {MIN_WINDOWS} '
+                       f'stretches of {window_m:g} m')
+    a, b = a[kept], b[kept]
     distance = travelled[b] - travelled[a]
     turn_error = (true_yaw[b] - true_yaw[a]) - (odo_yaw[b] - odo_yaw[a])
     rates = turn_error / distance
@@ -79,10 +107,13 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0):
                      fit={'method': 'fit_odometry', 'windows': len(rates),
                           'window_m': window_m})
     report = {'scans': int(len(stamps)),
+              'scans_outside_odometry': outside,
               'distance_m': float(travelled[-1]),
-              'odometry_distance_ratio': float(odo_travelled[-1] /
-                                               travelled[-1]),
+              'odometry_distance_ratio': float(odo_steps[~bridged].sum() /
+                                               steps[~bridged].sum()),
               'windows': int(len(rates)),
+              'windows_across_odometry_gaps': skipped,
+              'odometry_gap_limit_s': MAX_GAP_S,
               'drift_deg_per_m': math.degrees(drift),
               'drift_sd_deg_per_m': math.degrees(fitted.drift_sd),
               'window_drift_deg_per_m_sd': math.degrees(

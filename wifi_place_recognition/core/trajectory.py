@@ -5,9 +5,10 @@ A robot run is three stamped streams: scans (with the single-scan answer),
 odometry poses, and the truth (e.g. AMCL's pose at each scan).
 :func:`fuse_offline` runs :class:`.fusion.Fusion` over them in stamp order
 (what the node does live); :func:`dead_reckoning` places odometry alone in
-the map frame from the first true pose; :func:`score` gives the figures
-the README's robot table reports; :func:`truth_at` reads a truth file's
-poses at the scans' stamps.
+the map frame from a true pose inside its time span; :func:`score` gives
+the figures the README's robot table reports; :func:`truth_at` reads a
+truth file's poses at the scans' stamps; :func:`time_span` says when a
+stream runs, for messages.
 """
 
 import math
@@ -59,10 +60,14 @@ def dead_reckoning(odometry, stamps, start_xy, start_yaw, start_stamp):
     """
     Return odometry alone at ``stamps`` in the map frame: (xy, yaw).
 
-    The odometry pose at ``start_stamp`` is put on the true
-    ``start_xy``/``start_yaw`` (a rigid transform), as an oracle start.
+    The odometry pose at ``start_stamp`` (inside the odometry's time span,
+    else ValueError) is put on the true ``start_xy``/``start_yaw`` (a rigid
+    transform), as an oracle start. NaN at stamps outside the span.
     """
     t = odometry[:, 0]
+    if not t[0] <= start_stamp <= t[-1]:
+        raise ValueError(f'dead reckoning from {start_stamp!r}: outside the '
+                         f'odometry\'s time span {time_span(t)}')
 
     def at(s):
         x = np.interp(s, t, odometry[:, 1])
@@ -77,7 +82,21 @@ def dead_reckoning(odometry, stamps, start_xy, start_yaw, start_stamp):
         xy[i] = (start_xy[0] + c * step[0] - sn * step[1],
                  start_xy[1] + sn * step[0] + c * step[1])
         yaw[i] = wrap(start_yaw + step[2])
+    outside = (stamps < t[0]) | (stamps > t[-1])
+    xy[outside], yaw[outside] = np.nan, np.nan
     return xy, yaw
+
+
+def time_span(stamps):
+    """Return the text of the time span of ``stamps`` (s), for messages."""
+    stamps = np.asarray(stamps, np.float64)
+    if not len(stamps):
+        return 'no stamps'
+    low, high = float(np.min(stamps)), float(np.max(stamps))
+    return '{} to {} s ({} s)'.format(
+        *(f'{v:.3f}' if abs(v) < 1e12 else f'{v:.4g}'
+          for v in (low, high)),
+        f'{high - low:.1f}' if high - low < 1e12 else f'{high - low:.4g}')
 
 
 def truth_at(poses, stamps):

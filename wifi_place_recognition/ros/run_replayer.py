@@ -7,7 +7,9 @@ on ``wifi/scan`` and each odometry row a ``nav_msgs/Odometry`` on ``odom``
 times and sent in stamp order at ``speed`` times the recorded pace (an
 odometry pose before a scan of the same stamp). The node's answers on
 ``~/place`` (with each scan's own position) and its poses on ``~/pose``
-are matched to the scans by ``header.stamp``.
+are matched to the scans by ``header.stamp``. :func:`check_spans` refuses,
+before anything is sent, streams whose time spans do not overlap or whose
+replay would take far longer than the time they share (a stamp far off).
 """
 
 from dataclasses import dataclass
@@ -21,6 +23,7 @@ import numpy as np
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from ..core.trajectory import time_span
 from .messages import scan_message, status_values, yaw_of
 from .replayer import Replayer, unique_stamps
 
@@ -36,9 +39,42 @@ class RunReplayOptions:
     settle: float = 2.0      # s to wait for the last answers
 
     def __post_init__(self):
-        """Refuse a speed that is not a positive finite number."""
+        """Refuse a speed or wait that is not a finite number > 0 (>= 0)."""
         if not (math.isfinite(self.speed) and self.speed > 0):
             raise ValueError(f'speed must be > 0, not {self.speed!r}')
+        if not (math.isfinite(self.wait) and self.wait >= 0):
+            raise ValueError(f'wait must be a finite number >= 0, not '
+                             f'{self.wait!r}')
+
+
+#: Stamp seconds a replay may run beyond twice the time its streams share.
+SPAN_MARGIN_S = 60.0
+
+
+def check_spans(times, odometry_times, speed, names):
+    """
+    Refuse (ValueError) a replay of stamps that cannot be one run's.
+
+    ``times``: the scans' stamps, ``odometry_times`` the odometry's;
+    ``names``: (scans, odometry) for the message, which gives both time
+    spans. Refused: spans that do not overlap, or streams that span more
+    than twice the time they share plus :data:`SPAN_MARGIN_S` (a stamp far
+    off, which the replay, at ``speed``, would sleep through).
+    """
+    spans = f'the scans of {names[0]} span {time_span(times)}, the ' \
+        f'odometry {names[1]} {time_span(odometry_times)}'
+    first = max(np.min(times), np.min(odometry_times))
+    last = min(np.max(times), np.max(odometry_times))
+    if first > last:
+        raise ValueError(f'{spans}: they do not overlap (another clock, '
+                         f'or another run?)')
+    total = max(np.max(times), np.max(odometry_times)) - \
+        min(np.min(times), np.min(odometry_times))
+    if total > 2 * (last - first) + SPAN_MARGIN_S:
+        raise ValueError(f'{spans}: the replay would take {total / speed:.4g}'
+                         f' s at speed {speed:g}, for {last - first:.1f} s '
+                         f'that both span (a stamp far off?); cut the files '
+                         f'to the run')
 
 
 def odometry_message(row):

@@ -1,0 +1,182 @@
+"""
+Bad paths and stamps given to fit_odometry, replay_run and train_model.
+
+Every output is checked before any work (a folder, a missing folder, an
+input's file: refused, naming both, nothing written); replay_run refuses
+streams whose time spans cannot be one run's before it sends anything (it
+slept for years); fit_odometry counts the stretches it leaves out across
+an odometry gap and names its files and their time spans when it cannot
+fit; replay_run scores odometry alone only inside the odometry's span
+and says how many scans it scored.
+"""
+
+import json
+import math
+
+from conftest import python_module, run, surveyed_csv
+import numpy as np
+from test_fusion import straight
+from wifi_place_recognition.cli.replay_run import scored
+
+#: Seconds a command may take here: far less than a replay of a bad stamp.
+QUICK = 120
+
+
+def run_files(folder):
+    """Write a surveyed run: scans.csv (X, Y, YAW, TIMESTAMP), odom.csv."""
+    truth, odo = straight(n=1500, drift=math.radians(-1.0))
+    np.savetxt(folder / 'odom.csv', odo, delimiter=',',
+               header='TIMESTAMP,X,Y,YAW', comments='', fmt='%.6f')
+    lines = surveyed_csv(folder / 'survey.csv', scans_per_floor=150,
+                         floors=(0,)).read_text().splitlines()
+    header = lines[0].split(',') + ['TIMESTAMP', 'YAW']
+    x, y = header.index('X'), header.index('Y')
+    rows = [','.join(header)]
+    for line, i in zip(lines[1:], range(0, 1500, 10)):
+        cells = line.split(',') + [f'{truth[i, 0]:.3f}', f'{truth[i, 3]:.4f}']
+        cells[x], cells[y] = f'{truth[i, 1]:.3f}', f'{truth[i, 2]:.3f}'
+        rows.append(','.join(cells))
+    (folder / 'scans.csv').write_text('\n'.join(rows) + '\n')
+    return folder / 'scans.csv', folder / 'odom.csv', odo
+
+
+def write_odometry(path, rows):
+    """Write odometry rows as a pose CSV."""
+    np.savetxt(path, rows, delimiter=',', header='TIMESTAMP,X,Y,YAW',
+               comments='', fmt='%.6f')
+    return path
+
+
+def refused(result, *parts):
+    """Assert one error line naming ``parts``, exit 2, no traceback."""
+    assert result.returncode == 2, (result.stdout, result.stderr)
+    errors = [line for line in result.stderr.splitlines()
+              if line.startswith('error:')]
+    assert len(errors) == 1 and all(p in errors[0] for p in parts), \
+        result.stderr
+    assert 'Traceback' not in result.stderr
+
+
+def test_fit_odometry_counts_gaps_and_names_its_files(tmp_path,
+                                                      surveyed_model):
+    scans, odom, odo = run_files(tmp_path)
+    gapped = write_odometry(tmp_path / 'gapped.csv',
+                            odo[(odo[:, 0] < 50.0) | (odo[:, 0] > 70.0)])
+    report = tmp_path / 'report.json'
+    result = run(python_module(
+        'cli.fit_odometry', '--model', surveyed_model, '--data', scans,
+        '--odometry', gapped, '-o', tmp_path / 'fitted.npz', '--report',
+        report), timeout=QUICK)
+    assert result.returncode == 0, result.stderr
+    # 10 m of 75 m in the gap: 4 of the 24 stretches of 3 m touch it
+    assert '150 posed scans inside the odometry\'s time span (0 outside)' \
+        in result.stdout and '20 stretches (4 more across an odometry gap ' \
+        'longer than 1 s left out)' in result.stdout, result.stdout
+    assert json.loads(report.read_text())['windows_across_odometry_gaps'] \
+        == 4
+    # the odometry on another clock: both files and both spans named
+    moved = odo.copy()
+    moved[:, 0] -= 1000.0
+    result = run(python_module(
+        'cli.fit_odometry', '--model', surveyed_model, '--data', scans,
+        '--odometry', write_odometry(tmp_path / 'moved.csv', moved), '-o',
+        tmp_path / 'x.npz'), timeout=QUICK)
+    refused(result, f'{scans}: the run covers 0.0 m', f'{tmp_path}/moved.csv '
+            f'spans -1000.000 to -850.100 s (149.9 s), the posed scans 0.000 '
+            f'to 149.000 s (149.0 s), 150 of them outside')
+    one = write_odometry(tmp_path / 'one.csv', odo[:1])
+    result = run(python_module(
+        'cli.fit_odometry', '--model', surveyed_model, '--data', scans,
+        '--odometry', one, '-o', tmp_path / 'x.npz'), timeout=QUICK)
+    refused(result, f'{one}: need two or more poses in time order')
+    assert not (tmp_path / 'x.npz').exists()
+
+
+def test_no_output_is_written_when_one_cannot_be(tmp_path, surveyed_model):
+    scans, odom, _ = run_files(tmp_path)
+    model = tmp_path / 'model.npz'
+    model.write_bytes(surveyed_model.read_bytes())
+    (tmp_path / 'folder').mkdir()
+    for report, message in ((tmp_path / 'none' / 'r.json',
+                             f'--report {tmp_path}/none/r.json: no folder'),
+                            (tmp_path / 'folder', 'is a folder')):
+        result = run(python_module(
+            'cli.fit_odometry', '--model', model, '--data', scans,
+            '--odometry', odom, '--report', report), timeout=QUICK)
+        assert model.read_bytes() == surveyed_model.read_bytes()
+        refused(result, message)
+
+
+def test_an_output_that_is_an_input_is_refused(tmp_path, surveyed_model):
+    scans, odom, _ = run_files(tmp_path)
+    kept = {p: p.read_bytes() for p in (scans, odom)}
+    fit = ('cli.fit_odometry', '--model', surveyed_model, '--data', scans,
+           '--odometry', odom)
+    replay = ('cli.replay_run', '--data', scans, '--odometry', odom,
+              '--wait', '1')
+    for args, message in (
+            ((*fit, '-o', odom), f'-o {odom} is the input --odometry {odom}'),
+            ((*fit, '--report', scans),
+             f'--report {scans} is the input --data {scans}'),
+            ((*fit, '-o', tmp_path / 'm.npz', '--report', tmp_path / 'm.npz'),
+             'two outputs in one file'),
+            (('cli.train_model', '--data', scans, '-o', scans),
+             f'-o {scans} is the input --data {scans}'),
+            ((*replay, '--trajectory', scans),
+             f'--trajectory {scans} is the input --data {scans}'),
+            ((*replay, '--json', tmp_path / 'none' / 'x.json'),
+             f'--json {tmp_path}/none/x.json: no folder')):
+        result = run(python_module(*args), timeout=QUICK)
+        assert all(p.read_bytes() == data for p, data in kept.items()), args
+        refused(result, message)
+    assert not (tmp_path / 'm.npz').exists()
+
+
+def test_replay_run_refuses_stamps_of_no_run_before_it_sends(tmp_path):
+    scans, _, odo = run_files(tmp_path)
+    zero = odo.copy()
+    zero[:, 0] += 5000.0                      # another clock
+    later = odo.copy()
+    later[-1, 0] += 365 * 86400.0             # the last pose a year later
+    cases = [(zero, 'they do not overlap'),
+             (later, 'the replay would take 3.154e+06 s at speed 10, for '
+                     '149.0 s that both span')]
+    for k, (rows, message) in enumerate(cases):
+        odom = write_odometry(tmp_path / f'odom{k}.csv', rows)
+        result = run(python_module('cli.replay_run', '--data', scans,
+                                   '--odometry', odom, '--wait', '1'),
+                     timeout=QUICK)
+        refused(result, f'the scans of {scans} span 0.000 to 149.000 s '
+                f'(149.0 s), the odometry {odom} ', message)
+    result = run(python_module('cli.replay_run', '--data', scans,
+                               '--odometry', tmp_path / 'odom.csv',
+                               '--wait', 'nan'), timeout=QUICK)
+    assert result.returncode == 2 and \
+        '--wait must be a finite number >= 0, not nan' in result.stderr, \
+        result.stderr
+
+
+class Run:
+    """The scans of a replayed run, as scored() reads them."""
+
+    def __init__(self, stamps):
+        self.meta = {'TIMESTAMP': stamps}
+
+    def __len__(self):
+        return len(self.meta['TIMESTAMP'])
+
+
+def test_odometry_alone_is_scored_inside_the_odometry_only(tmp_path):
+    truth, odo = straight(n=600)
+    stamps = truth[::10, 0]
+    true_xy, true_yaw = truth[::10, 1:3].copy(), truth[::10, 3].copy()
+    true_xy[:3] = np.nan                        # no true pose
+    late = odo[odo[:, 0] >= 20.0]               # odometry from 20 s
+    scores, table = scored(Run(stamps), late, (true_xy, true_yaw), {})
+    assert scores['scans'] == {'total': 60, 'with_true_pose': 57,
+                               'without_true_pose': 3,
+                               'outside_odometry': 17}
+    assert scores['odometry']['scans'] == 40
+    assert np.isnan(table[stamps < 20.0, 6:9]).all()
+    np.testing.assert_allclose(table[stamps >= 20.0, 6:8],
+                               true_xy[stamps >= 20.0], atol=1e-6)
