@@ -120,3 +120,13 @@ def test_bad_walks_are_refused_naming_what_is_wrong(synthetic, scans,
     assert result.returncode == 2
     assert "is the model's training data" in result.stderr
     assert load_model(model_path).tracking is None       # nothing written
+    # an output that cannot be written, or is an input: nothing written
+    kept = model_path.read_bytes()
+    for args, message in ((('--report', tmp_path / 'none' / 'r.json'),
+                           'no folder'),
+                          (('-o', walk), f'-o {walk} is the input --walks')):
+        result = fit('--model', model_path, '--walks', walk, *args)
+        assert result.returncode == 2 and message in result.stderr, \
+            result.stderr
+        assert model_path.read_bytes() == kept
+    assert walk.read_text().splitlines() == text

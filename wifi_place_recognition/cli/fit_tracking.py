@@ -11,8 +11,9 @@ from ..core.artifact import load_model, save_model
 from ..core.atomic import atomic_write
 from ..core.tracking_fit import FitOptions, fit_tracking, walk_evidence
 from ..data.walks import walks
-from .common import (add_data_arguments, add_model_arguments, data_options,
-                     main_wrapper, read_data)
+from .common import (add_data_arguments, add_model_arguments,
+                     check_outputs, data_options, main_wrapper, read_data,
+                     same_file)
 
 
 @main_wrapper
@@ -40,6 +41,12 @@ def main(argv=None):
     args = p.parse_args(argv)
     if not args.timeout > 0:
         p.error('--timeout must be > 0')
+    in_place = args.output is None or same_file(args.output, args.model)
+    check_outputs([('--model' if in_place else '-o',
+                    args.model if in_place else args.output),
+                   ('--report', args.report)],
+                  [('--walks', w) for w in args.walks] +
+                  [('--model', args.model)])
     model = load_model(args.model)
     fp = read_data(args.walks, data_options(args), 'walks')
     trained_on = model.provenance.get('training_data', {}).get('sha256')
@@ -54,6 +61,9 @@ def main(argv=None):
         summary, walks=fp.source, walks_sha256=fp.sha256,
         created=time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())))
     out = args.output or args.model
+    if args.report:
+        with atomic_write(args.report, 'w') as f:
+            json.dump(report, f, indent=1)
     save_model(model, out)
     rates = summary['rates']
     print(f'{fp.source}: {summary["walks"]} walks, {summary["scans"]} '
@@ -67,9 +77,6 @@ def main(argv=None):
           f'tracked {tracked:.4f}: tracking:=true '
           + ('helps here' if tracked > single else
              'does not help here (keep tracking:=false)'))
-    if args.report:
-        with atomic_write(args.report, 'w') as f:
-            json.dump(report, f, indent=1)
     print(f'wrote {out}')
     return 0
 
