@@ -136,6 +136,21 @@ def test_two_confident_scans_of_another_floor_restart_there():
     assert fusion.counts['scans_without_position'] == 1
 
 
+def test_each_pose_carries_the_place_the_filter_was_on_for_it():
+    fusion = Fusion(seed=0)
+    fusion.odometry(0.0, 0.0, 0.0, 0.0)
+    fusion.odometry(1.0, 0.0, 0.0, 0.0)
+    [start] = fusion.scan(0.5, [0.0, 0.0], (0, 0))
+    assert start.place == (0, 0)
+    # two scans of floor 1 before the odometry covering them: one batch
+    assert fusion.scan(1.5, [20.0, 0.0], (0, 1)) == []
+    assert fusion.scan(2.5, [20.0, 0.0], (0, 1)) == []
+    still, moved = fusion.odometry(2.6, 0.0, 0.0, 0.0)[1]
+    assert (still.place, still.restarted) == ((0, 0), False)
+    assert (moved.place, moved.restarted) == ((0, 1), True)
+    assert fusion.pose().place == (0, 1)
+
+
 def test_a_long_gap_without_odometry_starts_afresh_and_a_short_one_spreads():
     fusion = Fusion(limits=FusionLimits(odom_timeout=0.5), seed=0)
     truth, odo = straight(n=600)

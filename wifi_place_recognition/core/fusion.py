@@ -69,6 +69,7 @@ class FusedPose:
     cov: np.ndarray      # (3, 3): x, y, yaw
     with_odometry: bool  # False: the scan was applied alone (odometry stale)
     restarted: bool      # the filter started afresh at this scan
+    place: tuple         # (building, floor) the filter was on for it
 
 
 def relative(a, b):
@@ -274,7 +275,7 @@ class Fusion:
         self.counts['scans_fused' if odometry else 'scans_alone'] += 1
         estimate = self.filter.estimate()
         return FusedPose(stamp, estimate.xy, estimate.yaw, estimate.cov,
-                         odometry, restart)
+                         odometry, restart, self.place)
 
     def pose(self):
         """
@@ -289,4 +290,4 @@ class Fusion:
         xy, yaw = compose(estimate.xy, estimate.yaw,
                           relative(self.anchor[1:], self.odom[-1][1:]))
         return FusedPose(self.odom[-1][0], xy, yaw, estimate.cov, True,
-                         False)
+                         False, self.place)

@@ -183,10 +183,9 @@ class OdometryFusion:
                 if seconds != pose.stamp:
                     continue
             self._published_stamp = pose.stamp
-            place = self.fusion.place
-            self._publish(pose, stamp, place,
-                          pose.restarted and place == self._place)
-            self._place = place
+            self._publish(pose, stamp, pose.place,
+                          pose.restarted and pose.place == self._place)
+            self._place = pose.place
 
     def _problem(self, what):
         self._last_problem = (what, time.monotonic())
