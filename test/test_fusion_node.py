@@ -322,3 +322,13 @@ def test_fusion_switched_on_while_running_gives_poses_between_scans(
         assert wait_until(lambda: drive.key(odometry_message(
             ahead).header.stamp) in drive.poses, 10, ros), \
             'no pose between scans'
+        # a request made while fusing survives fusion switched off before
+        # the fused pose came: the next answer carries it
+        assert client.set_param('odom_timeout', 30.0).successful
+        assert drive.call(drive.request).success
+        drive.scan(ahead[0] + 1.0, 12, 8, wait_pose=False)  # no odometry
+        assert client.set_param('fusion', False).successful
+        assert not drive.initial
+        _, pose = drive.scan(ahead[0] + 2.0, 12, 8)
+        assert wait_until(lambda: drive.initial, 10, ros), 'request lost'
+        assert drive.initial[-1].header.stamp == pose.header.stamp

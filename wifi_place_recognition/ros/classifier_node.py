@@ -249,6 +249,7 @@ class ClassifierNode(Node):
         if fusing:
             self._fuse(place, stamp, confident, reasons)
         else:
+            self._forget_pending()
             self._publish_pose(place, stamp, confident, reasons)
 
     def _publish_answer(self, status, stamp):
@@ -289,14 +290,22 @@ class ClassifierNode(Node):
         self.odometry.scan(stamp, place.scan_position,
                            (place.building, place.floor), confident)
 
+    def _forget_pending(self):
+        """Fusion stopped before a re-seed went out: a request waits on."""
+        if self._initial_pending is not None:
+            if 'requested' in self._initial_pending[1]:
+                self._send_initial_pose = True
+            self._initial_pending = None
+
     def _publish_fused(self, fused, stamp, place, relocated):
         """
         Publish a fused pose; on initialpose too when a re-seed is due.
 
         Due: the pending one (:meth:`_fuse`), or, with
         ``initial_pose_on_change``, a ``relocated`` filter (it started
-        afresh on the floor it was on: the robot was carried away), which
-        with fusion stands for the scans' own jumps.
+        afresh on the floor it was on: the scans kept disagreeing with it,
+        as when the robot is carried away, or it ran on WiFi alone for
+        long), which with fusion stands for the scans' own jumps.
         """
         frame = self.frame_id.format(building=place[0], floor=place[1])
         pose = pose_message(fused.xy, fused.cov, stamp, frame, fused.yaw)
@@ -389,6 +398,7 @@ def main(args=None):
 
 
 if __name__ == '__main__':
-    # As the executable: --help, and stop signals caught early.
+    # As the executable: --help starts nothing (stop signals are caught
+    # only from here, after the imports; the installed executable, earlier)
     from wifi_place_recognition.ros.executables import classifier_node as _run
     sys.exit(_run())

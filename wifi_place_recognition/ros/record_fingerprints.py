@@ -306,6 +306,7 @@ def main(args=None):
 
 
 if __name__ == '__main__':
-    # As the executable: --help, and stop signals caught early.
+    # As the executable: --help starts nothing (stop signals are caught
+    # only from here, after the imports; the installed executable, earlier)
     from wifi_place_recognition.ros.executables import record_fingerprints as _run
     sys.exit(_run())

@@ -155,6 +155,7 @@ def main(args=None):
 
 
 if __name__ == '__main__':
-    # As the executable: --help, and stop signals caught early.
+    # As the executable: --help starts nothing (stop signals are caught
+    # only from here, after the imports; the installed executable, earlier)
     from wifi_place_recognition.ros.executables import wifi_scanner_node as _run
     sys.exit(_run())
