@@ -122,12 +122,29 @@ def test_failed_write_keeps_the_previous_file(synthetic, tmp_path,
 def test_an_unwritable_path_is_named_and_nothing_is_left(synthetic, tmp_path,
                                                          where):
     model = load_model(synthetic[1])
-    path = tmp_path / 'missing' / 'm.npz' if where == 'no folder' \
-        else tmp_path
+    (tmp_path / 'sub').mkdir()
+    path = tmp_path / 'sub' / 'missing' / 'm.npz' if where == 'no folder' \
+        else tmp_path / 'sub'       # the temporary file goes beside it
     with pytest.raises(OSError) as err:
         save_model(model, path)
     assert err.value.filename == str(path)
-    assert not any(p.name.endswith('.tmp') for p in tmp_path.iterdir())
+    assert sorted(p.name for p in tmp_path.rglob('*')) == ['sub']
+
+
+def test_a_rewrite_keeps_a_link_and_the_file_permissions(synthetic,
+                                                         tmp_path):
+    model = load_model(synthetic[1])
+    target = tmp_path / 'v3.npz'
+    save_model(model, target)
+    target.chmod(0o600)
+    link = tmp_path / 'current.npz'
+    link.symlink_to(target.name)
+    model.provenance['note'] = 'rewritten through the link'
+    save_model(model, link)
+    assert link.is_symlink() and os.readlink(link) == target.name
+    assert load_model(target).provenance['note'] == \
+        'rewritten through the link'
+    assert stat.S_IMODE(target.stat().st_mode) == 0o600
 
 
 def test_a_model_file_carries_its_temperature(synthetic, tmp_path):

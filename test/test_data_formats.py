@@ -389,12 +389,22 @@ def test_robot_run_rows_without_a_pose_are_left_out_and_yaw_is_no_ap():
             parse(text.replace(old, new))
 
 
+def test_a_label_too_large_for_an_integer_is_refused():
+    text = 'WAP1,FLOOR,BUILDINGID\n-50,0,0\n-60,1e20,0\n'
+    with pytest.raises(DataError, match=r'row 3, column FLOOR: value 1e\+20 '
+                                        r'is not an integer in \[0, '):
+        parse(text)
+
+
 def test_a_pose_file_with_a_column_twice_is_refused(tmp_path):
     for header in ('TIMESTAMP,X,Y,YAW,yaw', 'TIMESTAMP,X,X,Y,YAW'):
         path = tmp_path / 'odom.csv'
         path.write_text(header + '\n' + ','.join(['1'] * 5) + '\n')
         with pytest.raises(DataError, match=r'columns \d and \d are both'):
             read_poses(path)
+    # other columns may repeat, or have no name (a trailing comma)
+    path.write_text('TIMESTAMP,X,Y,YAW,cov,cov,\n1,2,3,0.5,0,0,\n')
+    assert read_poses(path).tolist() == [[1, 2, 3, 0.5]]
 
 
 # the real WiFine folders and the command line ----------------------------------

@@ -3,6 +3,7 @@
 import contextlib
 import errno
 import os
+import stat
 import tempfile
 from pathlib import Path
 
@@ -25,18 +26,29 @@ def atomic_write(path, mode='wb', **kwargs):
     On any exception, or if the process dies, ``path`` keeps its previous
     content and the temporary file is removed (or left as ``.<name>.*.tmp``
     after a kill). An OSError of the write names ``path``, not the
-    temporary file.
+    temporary file. A symbolic link stays one (its target is replaced);
+    an existing file keeps its permissions, a new one gets the umask's.
     """
-    path = Path(path)
+    shown = str(path)
+    path = Path(os.path.realpath(path))
     folder = path.parent
+    try:
+        permissions = stat.S_IMODE(os.stat(path).st_mode)
+    except OSError:
+        permissions = 0o666 & ~_umask()
     try:
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=f'.{path.name}.',
                                    suffix='.tmp')
     except OSError as exc:      # no folder, not a folder, no permission
-        raise OSError(exc.errno, exc.strerror, str(path)) from None
+        raise OSError(exc.errno, exc.strerror, shown) from None
     try:
-        os.fchmod(fd, 0o666 & ~_umask())
-        with os.fdopen(fd, mode, **kwargs) as f:
+        try:
+            os.fchmod(fd, permissions)
+            f = os.fdopen(fd, mode, **kwargs)
+        except BaseException:
+            os.close(fd)
+            raise
+        with f:
             try:
                 yield f
                 f.flush()
@@ -45,11 +57,11 @@ def atomic_write(path, mode='wb', **kwargs):
                 if exc.filename is not None or \
                         exc.errno not in WRITE_ERRORS:
                     raise
-                raise OSError(exc.errno, exc.strerror, str(path)) from None
+                raise OSError(exc.errno, exc.strerror, shown) from None
         try:
             os.replace(tmp, path)
         except OSError as exc:  # e.g. path is a folder
-            raise OSError(exc.errno, exc.strerror, str(path)) from None
+            raise OSError(exc.errno, exc.strerror, shown) from None
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

@@ -23,8 +23,8 @@ def read_poses(path):
     Return the poses of a CSV: float64 (n, 4) rows of stamp, x, y, yaw.
 
     Raises :class:`DataError` naming the file, row and column of a missing
-    or repeated column (case ignored), a value that is not a finite number,
-    or a stamp earlier than the row before (equal stamps are kept).
+    or repeated pose column (case ignored), a value that is not a finite
+    number, or a stamp earlier than the row before (equal stamps are kept).
     """
     try:
         with open(path, 'rb') as f:
@@ -35,10 +35,11 @@ def read_poses(path):
     header = [h.strip() for h in next(rows, [])]
     index = {}
     for j, h in enumerate(header):
-        if h.upper() in index:
-            raise DataError(f'{path}: columns {index[h.upper()] + 1} and '
-                            f'{j + 1} are both {h.upper()} (case ignored)')
-        index[h.upper()] = j
+        key = h.upper()
+        if key in POSE_COLUMNS and key in index:
+            raise DataError(f'{path}: columns {index[key] + 1} and {j + 1} '
+                            f'are both {key} (case ignored)')
+        index.setdefault(key, j)
     missing = [c for c in POSE_COLUMNS if c not in index]
     if missing:
         raise DataError(f'{path}: no column(s) {", ".join(missing)} (a pose '

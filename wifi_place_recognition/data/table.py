@@ -11,6 +11,9 @@ import numpy as np
 
 from .files import DataError
 
+#: The largest building or floor label (an int64 takes larger ones badly).
+MAX_LABEL = 10 ** 9
+
 
 def read_header(text, name):
     """Return the header row's column names, or fail (none, blank, twice)."""
@@ -81,10 +84,11 @@ class Table:
     def label(self, j):
         """Return a label column as int64, or fail naming the bad cell."""
         v = self.numeric(j)
-        wrong = (v < 0) | (v != np.round(v))
+        wrong = (v < 0) | (v != np.round(v)) | (v > MAX_LABEL)
         if wrong.any():
             r = int(np.argmax(wrong))
-            self.fail(r, j, f'value {v[r]:g} is not a non-negative integer')
+            self.fail(r, j, f'value {v[r]:g} is not an integer in [0, '
+                      f'{MAX_LABEL}]')
         return v.astype(np.int64)
 
     def _numeric_text(self, j):
