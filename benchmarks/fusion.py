@@ -32,8 +32,8 @@ from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.fusion import Fusion
 from wifi_place_recognition.core.particles import FusionParams
-from wifi_place_recognition.core.trajectory import (dead_reckoning,
-                                                    fuse_offline, score)
+from wifi_place_recognition.core.trajectory import (fuse_offline,
+                                                    odometry_alone, score)
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.poses import read_poses
 
@@ -68,7 +68,7 @@ class Run:
         self.fp = fp
         self.stamps = fp.meta['TIMESTAMP']
         self.xy = fp.position
-        self.yaw = fp.meta['YAW'].astype(float)
+        self.yaw = fp.meta['YAW']
         self.odometry = read_poses(folder / 'odom.csv')
 
 
@@ -98,8 +98,8 @@ def pair(train_paths, test):
     """Return the figures of one test run with one training run's models."""
     plain, fitted = (load_model(p) for p in train_paths)
     single = single_scans(plain, test)
-    odo_xy, odo_yaw = dead_reckoning(test.odometry, test.stamps, test.xy[0],
-                                     test.yaw[0], test.stamps[0])
+    odo_xy, odo_yaw = odometry_alone(test.odometry, test.stamps, test.xy,
+                                     test.yaw)
     out = {'single': score(test.stamps, test.xy, single),
            'odometry': score(test.stamps, test.xy, odo_xy, test.yaw,
                              odo_yaw),

@@ -3,11 +3,13 @@ Bad paths and stamps given to fit_odometry, replay_run and train_model.
 
 Every output is checked before any work (a folder, a missing folder, an
 input's file: refused, naming both, nothing written); replay_run refuses
-streams whose time spans cannot be one run's before it sends anything (it
-slept for years); fit_odometry counts the stretches it leaves out across
-an odometry gap and names its files and their time spans when it cannot
-fit; replay_run scores odometry alone only inside the odometry's span
-and says how many scans it scored.
+streams whose time spans do not overlap or whose replay would take more
+than a day before it sends anything (it slept for years), and leaves out,
+counted, the odometry more than 10 s outside the scans' span;
+fit_odometry counts the stretches it leaves out across an odometry gap
+and names its files and their time spans when it cannot fit; replay_run
+scores odometry alone only inside the odometry's span and says how many
+scans it scored.
 """
 
 import json
@@ -136,24 +138,59 @@ def test_replay_run_refuses_stamps_of_no_run_before_it_sends(tmp_path):
     scans, _, odo = run_files(tmp_path)
     zero = odo.copy()
     zero[:, 0] += 5000.0                      # another clock
-    later = odo.copy()
-    later[-1, 0] += 365 * 86400.0             # the last pose a year later
-    cases = [(zero, 'they do not overlap'),
-             (later, 'the replay would take 3.154e+06 s at speed 10, for '
-                     '149.0 s that both span')]
-    for k, (rows, message) in enumerate(cases):
-        odom = write_odometry(tmp_path / f'odom{k}.csv', rows)
-        result = run(python_module('cli.replay_run', '--data', scans,
-                                   '--odometry', odom, '--wait', '1'),
-                     timeout=QUICK)
-        refused(result, f'the scans of {scans} span 0.000 to 149.000 s '
-                f'(149.0 s), the odometry {odom} ', message)
+    odom = write_odometry(tmp_path / 'zero.csv', zero)
+    result = run(python_module('cli.replay_run', '--data', scans,
+                               '--odometry', odom, '--wait', '1'),
+                 timeout=QUICK)
+    refused(result, f'the scans of {scans} span 0.000 to 149.000 s '
+            f'(149.0 s), the odometry {odom} 5000.000 to 5149.900 s '
+            f'(149.9 s): they do not overlap')
+    # overlapping spans, but no odometry within 10 s of any scan
+    apart = odo.copy()
+    apart[:750, 0] -= 100.0                   # -100.000 to -25.100 s
+    apart[750:, 0] += 100.0                   # 175.000 to 249.900 s
+    odom = write_odometry(tmp_path / 'apart.csv', apart)
+    result = run(python_module('cli.replay_run', '--data', scans,
+                               '--odometry', odom, '--wait', '1'),
+                 timeout=QUICK)
+    refused(result, f'the odometry {odom} -100.000 to 249.900 s (349.9 s): '
+            f'no odometry pose within 10 s of the scans')
+    # one scan stamp far off: the scans' own span is absurd
+    lines = scans.read_text().splitlines()
+    cells = lines[-1].split(',')
+    cells[lines[0].split(',').index('TIMESTAMP')] = '1e300'
+    far = tmp_path / 'far.csv'
+    far.write_text('\n'.join(lines[:-1] + [','.join(cells)]) + '\n')
+    result = run(python_module('cli.replay_run', '--data', far,
+                               '--odometry', tmp_path / 'odom.csv',
+                               '--wait', '1'), timeout=QUICK)
+    refused(result, f'the scans of {far} span 0.000 to 1e+300 s (1e+300 '
+            f's), the odometry {tmp_path}/odom.csv 0.000 to 149.900 s '
+            f'(149.9 s): the replay would take 1e+299 s at speed 10, more '
+            f'than a day (86400 s)')
     result = run(python_module('cli.replay_run', '--data', scans,
                                '--odometry', tmp_path / 'odom.csv',
                                '--wait', 'nan'), timeout=QUICK)
     assert result.returncode == 2 and \
         '--wait must be a finite number >= 0, not nan' in result.stderr, \
         result.stderr
+
+
+def test_replay_run_trims_odometry_longer_than_the_scans(tmp_path):
+    # 150 s of scans cut from a 450 s recording: the odometry beyond 10 s
+    # of the scans is left out, counted, and the rest sent (no node here)
+    scans, _, _ = run_files(tmp_path)
+    _, odo = straight(n=4500)
+    odo[:, 0] -= 100.05                       # -100.05 to 349.85 s
+    odom = write_odometry(tmp_path / 'long.csv', odo)
+    result = run(python_module('cli.replay_run', '--data', scans,
+                               '--odometry', odom, '--wait', '1'),
+                 timeout=QUICK)
+    assert result.returncode == 1, result.stderr
+    assert f'note: {odom}: sending 1690 of 4500 odometry poses, 2810 ' \
+        f'left out (more than 10 s outside the scans\' time span 0.000 ' \
+        f'to 149.000 s (149.0 s))' in result.stderr, result.stderr
+    assert 'no classifier node took odom' in result.stderr, result.stderr
 
 
 class Run:

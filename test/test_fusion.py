@@ -20,7 +20,8 @@ from wifi_place_recognition.core.fusion import Fusion, FusionLimits
 from wifi_place_recognition.core.odometry_fit import FitError, fit_odometry
 from wifi_place_recognition.core.particles import FusionParams, wrap
 from wifi_place_recognition.core.trajectory import (dead_reckoning,
-                                                    fuse_offline, score)
+                                                    fuse_offline,
+                                                    odometry_alone, score)
 from wifi_place_recognition.data.files import DataError
 from wifi_place_recognition.data.poses import read_poses
 
@@ -290,10 +291,13 @@ def test_fit_odometry_leaves_out_the_stretches_across_an_odometry_gap():
     assert report['windows_across_odometry_gaps'] == 7   # 20 m: 7 of 3 m
     assert report['windows'] == whole['windows'] - 7 == params.fit['windows']
     assert report['odometry_distance_ratio'] == pytest.approx(1.0, abs=1e-3)
-    # a gap up to the node's odom_timeout (1 s) is bridged
-    short = odo[(odo[:, 0] < 99.95) | (odo[:, 0] > 100.85)]
-    assert fit_odometry(short, truth[at, 0], truth[at, 1:3],
-                        truth[at, 3])[1]['windows_across_odometry_gaps'] == 0
+    # a gap within the node's default odom_timeout (1 s) is bridged, a
+    # longer one is not
+    for drop, across in (((99.95, 100.75), 0), ((99.95, 100.95), 1)):
+        gap = odo[(odo[:, 0] < drop[0]) | (odo[:, 0] > drop[1])]
+        assert round(np.diff(gap[:, 0]).max(), 6) == 0.9 + 0.2 * across
+        assert fit_odometry(gap, truth[at, 0], truth[at, 1:3], truth[at, 3]
+                            )[1]['windows_across_odometry_gaps'] == across
 
 
 def test_fit_errors_name_the_files_and_both_time_spans():
@@ -331,9 +335,19 @@ def test_odometry_alone_is_nan_outside_the_odometry_and_starts_inside():
     assert np.isnan(xy[~inside]).all() and np.isnan(yaw[~inside]).all()
     np.testing.assert_allclose(xy[inside], truth[::10][inside, 1:3],
                                atol=1e-6)
-    with pytest.raises(ValueError, match='outside the odometry.s time span '
+    with pytest.raises(ValueError, match='^dead reckoning from 0.000 s: '
+                                         'outside the odometry.s time span '
                                          '20.000 to 40.000 s'):
         dead_reckoning(middle, stamps, truth[0, 1:3], truth[0, 3], stamps[0])
+    # odometry alone (replay_run, benchmarks/fusion.py) starts at the first
+    # true pose inside the odometry, not at the run's first scan
+    true_xy, true_yaw = truth[::10, 1:3].copy(), truth[::10, 3].copy()
+    true_xy[first] = np.nan                     # no true pose at 20 s
+    alone_xy, alone_yaw = odometry_alone(middle, stamps, true_xy, true_yaw)
+    np.testing.assert_allclose(alone_xy, xy, atol=1e-6)
+    assert np.isnan(alone_yaw[~inside]).all()
+    assert np.isnan(odometry_alone(middle, stamps[:first], true_xy[:first],
+                                   true_yaw[:first])[0]).all()
 
 
 def test_pose_files_name_what_is_wrong(tmp_path):

@@ -48,6 +48,18 @@ def add_model_arguments(parser, section):
                              f'here instead')
 
 
+def model_output(args):
+    """
+    Return (option, path) of the model file a fit writes.
+
+    ``--model`` rewritten in place without ``-o`` (or with ``-o`` naming
+    that file), else ``-o``: for :func:`check_outputs` and the save.
+    """
+    if args.output is None or same_file(args.output, args.model):
+        return '--model', args.model
+    return '-o', args.output
+
+
 def add_data_arguments(parser, training=False):
     """Add the options that say how to read fingerprint files."""
     d = ReaderOptions()

@@ -12,8 +12,8 @@ from ..core.odometry_fit import fit_odometry
 from ..core.particles import FusionParams
 from ..data.poses import read_poses
 from .common import (add_data_arguments, add_model_arguments,
-                     check_outputs, data_options, main_wrapper, read_data,
-                     same_file)
+                     check_outputs, data_options, main_wrapper,
+                     model_output, read_data)
 
 
 @main_wrapper
@@ -43,10 +43,8 @@ def main(argv=None):
     args = p.parse_args(argv)
     if not args.window > 0:
         p.error('--window must be > 0')
-    in_place = args.output is None or same_file(args.output, args.model)
-    out = args.model if in_place else args.output
-    check_outputs([('--model' if in_place else '-o', out),
-                   ('--report', args.report)],
+    option, out = model_output(args)
+    check_outputs([(option, out), ('--report', args.report)],
                   [('--data', d) for d in args.data] +
                   [('--odometry', args.odometry), ('--model', args.model)])
     model = load_model(args.model)
@@ -61,7 +59,7 @@ def main(argv=None):
     odometry = read_poses(args.odometry)
     params, report = fit_odometry(
         odometry, fp.meta['TIMESTAMP'], fp.position,
-        fp.meta['YAW'].astype(float), model.fusion or FusionParams(),
+        fp.meta['YAW'], model.fusion or FusionParams(),
         args.window, (fp.source, str(args.odometry)))
     report.update(run=fp.source, run_sha256=fp.sha256,
                   odometry=str(args.odometry),

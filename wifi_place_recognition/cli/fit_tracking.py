@@ -12,8 +12,8 @@ from ..core.atomic import atomic_write
 from ..core.tracking_fit import FitOptions, fit_tracking, walk_evidence
 from ..data.walks import walks
 from .common import (add_data_arguments, add_model_arguments,
-                     check_outputs, data_options, main_wrapper, read_data,
-                     same_file)
+                     check_outputs, data_options, main_wrapper,
+                     model_output, read_data)
 
 
 @main_wrapper
@@ -41,10 +41,8 @@ def main(argv=None):
     args = p.parse_args(argv)
     if not args.timeout > 0:
         p.error('--timeout must be > 0')
-    in_place = args.output is None or same_file(args.output, args.model)
-    check_outputs([('--model' if in_place else '-o',
-                    args.model if in_place else args.output),
-                   ('--report', args.report)],
+    option, out = model_output(args)
+    check_outputs([(option, out), ('--report', args.report)],
                   [('--walks', w) for w in args.walks] +
                   [('--model', args.model)])
     model = load_model(args.model)
@@ -60,7 +58,6 @@ def main(argv=None):
     model.tracking = replace(params, fit=dict(
         summary, walks=fp.source, walks_sha256=fp.sha256,
         created=time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())))
-    out = args.output or args.model
     if args.report:
         with atomic_write(args.report, 'w') as f:
             json.dump(report, f, indent=1)

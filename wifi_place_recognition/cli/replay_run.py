@@ -10,10 +10,11 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from ..core.atomic import atomic_write
-from ..core.trajectory import dead_reckoning, score, truth_at
+from ..core.trajectory import (inside_span, odometry_alone, score,
+                               time_span, truth_at)
 from ..data.poses import read_poses
-from ..ros.run_replayer import (arrays, check_spans, replay_run,
-                                RunReplayOptions)
+from ..ros.run_replayer import (arrays, check_spans, ODOMETRY_MARGIN_S,
+                                replay_run, RunReplayOptions)
 from .common import (add_data_arguments, check_outputs, data_options,
                      main_wrapper, read_data)
 
@@ -78,13 +79,20 @@ def main(argv=None):
     if not np.isfinite(truth[0]).all(axis=1).any():
         raise ValueError(f'{args.truth or fp.source}: no true pose within '
                          f'the time span of the scans of {fp.source}')
-    check_spans(fp.meta['TIMESTAMP'], odometry[:, 0], options.speed,
-                (fp.source, args.odometry))
+    send = check_spans(fp.meta['TIMESTAMP'], odometry[:, 0], options.speed,
+                       (fp.source, args.odometry))
+    sent = int(send.sum())
+    if sent < len(send):
+        print(f'note: {args.odometry}: sending {sent} of {len(send)} '
+              f'odometry poses, {len(send) - sent} left out (more than '
+              f'{ODOMETRY_MARGIN_S:g} s outside the scans\' time span '
+              f'{time_span(fp.meta["TIMESTAMP"])})', file=sys.stderr,
+              flush=True)
     rclpy.init(args=ros_args)
     node = rclpy.create_node('run_replayer')
     try:
-        results = replay_run(node, fp, odometry, options, lambda s: print(
-            s, file=sys.stderr, flush=True))
+        results = replay_run(node, fp, odometry[send], options,
+                             lambda s: print(s, file=sys.stderr, flush=True))
     except (KeyboardInterrupt, ExternalShutdownException):
         return 130
     except RuntimeError as exc:
@@ -94,10 +102,13 @@ def main(argv=None):
         node.destroy_node()
         rclpy.try_shutdown()
     scores, table = scored(fp, odometry, truth, results)
+    scores['odometry_poses'] = {'total': len(send), 'sent': sent,
+                                'left_out': len(send) - sent}
     answered = sum(status is not None for status, _ in results.values())
     print(f'{fp.source}: {answered}/{len(fp)} scans answered, '
           f'{sum(pose is not None for _, pose in results.values())} with a '
-          f'pose; odometry {args.odometry}')
+          f'pose; odometry {args.odometry}: {sent} of {len(send)} poses '
+          f'sent')
     n = scores['scans']
     print(f'scored {n["with_true_pose"]} of {n["total"]} scans '
           f'({n["without_true_pose"]} without a true pose); odometry alone '
@@ -123,7 +134,7 @@ def _own_truth(fp):
     if fp.position is None or 'YAW' not in fp.meta:
         raise ValueError(f'{fp.source}: no X, Y, YAW columns to score '
                          f'against: give --truth')
-    return fp.position, fp.meta['YAW'].astype(float)
+    return fp.position, fp.meta['YAW']
 
 
 def scored(fp, odometry, truth, results):
@@ -132,12 +143,8 @@ def scored(fp, odometry, truth, results):
     true_xy, true_yaw = truth
     single, xy, yaw, cov = arrays(results, len(fp))
     posed = np.isfinite(true_xy).all(axis=1)
-    inside = posed & (stamps >= odometry[0, 0]) & (stamps <= odometry[-1, 0])
-    odo_xy, odo_yaw = np.full((len(fp), 2), np.nan), np.full(len(fp), np.nan)
-    if inside.any():
-        first = np.flatnonzero(inside)[np.argmin(stamps[inside])]
-        odo_xy, odo_yaw = dead_reckoning(odometry, stamps, true_xy[first],
-                                         true_yaw[first], stamps[first])
+    inside = posed & inside_span(stamps, odometry[:, 0])
+    odo_xy, odo_yaw = odometry_alone(odometry, stamps, true_xy, true_yaw)
     scores = {'single': score(stamps, true_xy, single),
               'odometry': score(stamps, true_xy, odo_xy, true_yaw, odo_yaw),
               'fused': score(stamps, true_xy, xy, true_yaw, yaw, cov),

@@ -8,7 +8,7 @@ metres of travel, the true turn minus the odometry's turn, per metre, is
 the odometry's heading drift (wheel odometry often loses a steady angle per
 metre); :func:`fit_odometry` returns :class:`.particles.FusionParams` with
 that drift as the filter's prior, and a report of what it measured.
-A stretch across a gap in the odometry longer than the node's
+A stretch across a gap in the odometry longer than the node's default
 ``odom_timeout`` (the node does not bridge such a gap either) is left out
 and counted: the odometry's turn over the gap is unknown.
 """
@@ -20,13 +20,14 @@ import numpy as np
 
 from .fusion import FusionLimits
 from .particles import FusionParams
-from .trajectory import time_span
+from .trajectory import inside_span, time_span
 
 #: The least spread given to a fitted drift (rad per m).
 MIN_DRIFT_SD = 0.005
 #: Stretches needed for a fit.
 MIN_WINDOWS = 3
-#: The longest odometry gap a stretch may span (s): the node's own limit.
+#: The longest odometry gap a stretch may span (s): the node's default
+#: ``odom_timeout``.
 MAX_GAP_S = FusionLimits().odom_timeout
 
 
@@ -41,12 +42,12 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
 
     ``odometry``: (m, 4) rows of stamp, x, y, yaw in time order;
     ``stamps``, ``xy``, ``yaw``: the true poses (rows with NaN are left
-    out, and counted when outside the odometry's time span); ``names``:
-    of the scans and the odometry, for messages. ``drift_mean`` becomes
-    the total true-minus-odometry turn over the distance driven in the
-    stretches that span no odometry gap longer than :data:`MAX_GAP_S`,
-    ``drift_sd`` its standard error over them (at least
-    :data:`MIN_DRIFT_SD`).
+    out; finite ones outside the odometry's time span are left out and
+    counted); ``names``: of the scans and the odometry, for messages.
+    ``drift_mean`` becomes the total true-minus-odometry turn over the
+    distance driven in the stretches that span no odometry gap longer
+    than :data:`MAX_GAP_S`, ``drift_sd`` its standard error over them (at
+    least :data:`MIN_DRIFT_SD`).
     """
     params = params or FusionParams()
     run, odometry_name = names
@@ -63,7 +64,7 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
     t = odometry[:, 0]
     posed = np.isfinite(stamps) & np.isfinite(xy).all(axis=1) & \
         np.isfinite(yaw)
-    ok = posed & (stamps >= t[0]) & (stamps <= t[-1])
+    ok = posed & inside_span(stamps, t)
     outside = int(posed.sum() - ok.sum())
     spans = (f'{odometry_name} spans {time_span(t)}, the posed scans '
              f'{time_span(stamps[posed])}, {outside} of them outside')
@@ -80,7 +81,7 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
     true_yaw = np.unwrap(yaw)
     steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
     travelled = np.concatenate([[0.0], np.cumsum(steps)])
-    bridged = across(stamps[:-1], stamps[1:])
+    across_gap = across(stamps[:-1], stamps[1:])
     odo_steps = np.linalg.norm(np.diff(odo_xy, axis=0), axis=1)
     edges = [0]
     for i in range(1, len(stamps)):
@@ -109,8 +110,8 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
     report = {'scans': int(len(stamps)),
               'scans_outside_odometry': outside,
               'distance_m': float(travelled[-1]),
-              'odometry_distance_ratio': float(odo_steps[~bridged].sum() /
-                                               steps[~bridged].sum()),
+              'odometry_distance_ratio': float(
+                  odo_steps[~across_gap].sum() / steps[~across_gap].sum()),
               'windows': int(len(rates)),
               'windows_across_odometry_gaps': skipped,
               'odometry_gap_limit_s': MAX_GAP_S,

@@ -5,9 +5,11 @@ A robot run is three stamped streams: scans (with the single-scan answer),
 odometry poses, and the truth (e.g. AMCL's pose at each scan).
 :func:`fuse_offline` runs :class:`.fusion.Fusion` over them in stamp order
 (what the node does live); :func:`dead_reckoning` places odometry alone in
-the map frame from a true pose inside its time span; :func:`score` gives
+the map frame from a true pose inside its time span, and
+:func:`odometry_alone` from the first one there; :func:`score` gives
 the figures the README's robot table reports; :func:`truth_at` reads a
-truth file's poses at the scans' stamps; :func:`time_span` says when a
+truth file's poses at the scans' stamps; :func:`inside_span` is the one
+rule of "inside a stream's time span", :func:`time_span` says when a
 stream runs, for messages.
 """
 
@@ -56,6 +58,12 @@ def fuse_offline(odometry, scans, fusion=None):
     return out_xy, out_yaw, out_cov
 
 
+def inside_span(stamps, times):
+    """Return whether each of ``stamps`` lies within the span of ``times``."""
+    stamps = np.asarray(stamps, np.float64)
+    return (stamps >= np.min(times)) & (stamps <= np.max(times))
+
+
 def dead_reckoning(odometry, stamps, start_xy, start_yaw, start_stamp):
     """
     Return odometry alone at ``stamps`` in the map frame: (xy, yaw).
@@ -65,9 +73,9 @@ def dead_reckoning(odometry, stamps, start_xy, start_yaw, start_stamp):
     transform), as an oracle start. NaN at stamps outside the span.
     """
     t = odometry[:, 0]
-    if not t[0] <= start_stamp <= t[-1]:
-        raise ValueError(f'dead reckoning from {start_stamp!r}: outside the '
-                         f'odometry\'s time span {time_span(t)}')
+    if not inside_span(start_stamp, t):
+        raise ValueError(f'dead reckoning from {_seconds(start_stamp)} s: '
+                         f'outside the odometry\'s time span {time_span(t)}')
 
     def at(s):
         x = np.interp(s, t, odometry[:, 1])
@@ -82,9 +90,32 @@ def dead_reckoning(odometry, stamps, start_xy, start_yaw, start_stamp):
         xy[i] = (start_xy[0] + c * step[0] - sn * step[1],
                  start_xy[1] + sn * step[0] + c * step[1])
         yaw[i] = wrap(start_yaw + step[2])
-    outside = (stamps < t[0]) | (stamps > t[-1])
+    outside = ~inside_span(stamps, t)
     xy[outside], yaw[outside] = np.nan, np.nan
     return xy, yaw
+
+
+def odometry_alone(odometry, stamps, xy, yaw):
+    """
+    Return odometry alone at ``stamps``, from the first true pose in it.
+
+    :func:`dead_reckoning` from the earliest stamp inside the odometry's
+    time span with a finite true ``xy`` and ``yaw``: (xy (n, 2), yaw (n,)),
+    NaN outside the span (all NaN when no true pose lies inside it).
+    """
+    stamps = np.asarray(stamps, np.float64)
+    start = inside_span(stamps, odometry[:, 0]) & \
+        np.isfinite(xy).all(axis=1) & np.isfinite(yaw)
+    if not start.any():
+        return np.full((len(stamps), 2), np.nan), np.full(len(stamps), np.nan)
+    first = np.flatnonzero(start)[np.argmin(stamps[start])]
+    return dead_reckoning(odometry, stamps, xy[first], yaw[first],
+                          stamps[first])
+
+
+def _seconds(value):
+    """Return the text of a stamp or a duration (s), huge ones short."""
+    return f'{value:.3f}' if abs(value) < 1e12 else f'{value:.4g}'
 
 
 def time_span(stamps):
@@ -94,8 +125,7 @@ def time_span(stamps):
         return 'no stamps'
     low, high = float(np.min(stamps)), float(np.max(stamps))
     return '{} to {} s ({} s)'.format(
-        *(f'{v:.3f}' if abs(v) < 1e12 else f'{v:.4g}'
-          for v in (low, high)),
+        _seconds(low), _seconds(high),
         f'{high - low:.1f}' if high - low < 1e12 else f'{high - low:.4g}')
 
 
@@ -107,7 +137,7 @@ def truth_at(poses, stamps):
     arc); NaN outside their time span.
     """
     t = poses[:, 0]
-    inside = (stamps >= t[0]) & (stamps <= t[-1])
+    inside = inside_span(stamps, t)
     xy = np.column_stack([np.interp(stamps, t, poses[:, 1]),
                           np.interp(stamps, t, poses[:, 2])])
     yaw = wrap(np.interp(stamps, t, np.unwrap(poses[:, 3])))

@@ -9,7 +9,8 @@ odometry pose before a scan of the same stamp). The node's answers on
 ``~/place`` (with each scan's own position) and its poses on ``~/pose``
 are matched to the scans by ``header.stamp``. :func:`check_spans` refuses,
 before anything is sent, streams whose time spans do not overlap or whose
-replay would take far longer than the time they share (a stamp far off).
+replay would take more than a day (a stamp far off), and leaves out the
+odometry more than :data:`ODOMETRY_MARGIN_S` outside the scans' span.
 """
 
 from dataclasses import dataclass
@@ -47,34 +48,45 @@ class RunReplayOptions:
                              f'{self.wait!r}')
 
 
-#: Stamp seconds a replay may run beyond twice the time its streams share.
-SPAN_MARGIN_S = 60.0
+#: Seconds of odometry sent before the scans' first stamp and after their
+#: last (the node's default odom_timeout is 1 s); the rest is left out.
+ODOMETRY_MARGIN_S = 10.0
+#: The longest replay (s of wall-clock time) :func:`check_spans` accepts.
+MAX_REPLAY_S = 86400.0
 
 
 def check_spans(times, odometry_times, speed, names):
     """
-    Refuse (ValueError) a replay of stamps that cannot be one run's.
+    Return which odometry poses to send; refuse (ValueError) a bad replay.
 
     ``times``: the scans' stamps, ``odometry_times`` the odometry's;
     ``names``: (scans, odometry) for the message, which gives both time
-    spans. Refused: spans that do not overlap, or streams that span more
-    than twice the time they share plus :data:`SPAN_MARGIN_S` (a stamp far
-    off, which the replay, at ``speed``, would sleep through).
+    spans. Sent (a boolean mask): the poses within
+    :data:`ODOMETRY_MARGIN_S` of the scans' time span. Refused: spans that
+    do not overlap, no pose to send, or a replay of the scans and the poses
+    sent that would take more than :data:`MAX_REPLAY_S` at ``speed`` (a
+    stamp far off, which the replay would sleep through).
     """
     spans = f'the scans of {names[0]} span {time_span(times)}, the ' \
         f'odometry {names[1]} {time_span(odometry_times)}'
-    first = max(np.min(times), np.min(odometry_times))
-    last = min(np.max(times), np.max(odometry_times))
-    if first > last:
+    low, high = np.min(times), np.max(times)
+    if max(low, np.min(odometry_times)) > min(high, np.max(odometry_times)):
         raise ValueError(f'{spans}: they do not overlap (another clock, '
                          f'or another run?)')
-    total = max(np.max(times), np.max(odometry_times)) - \
-        min(np.min(times), np.min(odometry_times))
-    if total > 2 * (last - first) + SPAN_MARGIN_S:
-        raise ValueError(f'{spans}: the replay would take {total / speed:.4g}'
-                         f' s at speed {speed:g}, for {last - first:.1f} s '
-                         f'that both span (a stamp far off?); cut the files '
-                         f'to the run')
+    send = (odometry_times >= low - ODOMETRY_MARGIN_S) & \
+        (odometry_times <= high + ODOMETRY_MARGIN_S)
+    if not send.any():
+        raise ValueError(f'{spans}: no odometry pose within '
+                         f'{ODOMETRY_MARGIN_S:g} s of the scans (a gap in '
+                         f'the odometry across all of them)')
+    sent = odometry_times[send]
+    seconds = (max(high, np.max(sent)) - min(low, np.min(sent))) / speed
+    if seconds > MAX_REPLAY_S:
+        raise ValueError(f'{spans}: the replay would take {seconds:.4g} s at '
+                         f'speed {speed:g}, more than a day '
+                         f'({MAX_REPLAY_S:g} s): a stamp far off? Cut the '
+                         f'files to the run or raise --speed')
+    return send
 
 
 def odometry_message(row):
