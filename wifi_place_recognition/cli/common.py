@@ -4,10 +4,10 @@ from dataclasses import dataclass, field, replace
 import functools
 import os
 import sys
-import tempfile
 from pathlib import Path
 
 from ..core.artifact import ModelFileError
+from ..core.atomic import probe_folder
 from ..data.files import DataError, download_uci
 from ..data.fingerprints import (read_fingerprints, ReaderOptions,
                                  SMALL_CLASS_POLICIES)
@@ -200,10 +200,7 @@ def check_outputs(outputs, inputs=()):
         if not folder.is_dir():
             raise ValueError(f'{option} {path}: no folder {folder}')
         try:
-            fd, probe = tempfile.mkstemp(dir=folder, prefix=f'.{path.name}.',
-                                         suffix='.probe')
-            os.close(fd)
-            os.unlink(probe)
+            probe_folder(path)
         except OSError as exc:
             raise ValueError(f'{option} {path}: cannot write in the folder '
                              f'{folder} ({exc.strerror or exc})') from None

@@ -18,6 +18,15 @@ def _umask():
     return mask
 
 
+def probe_folder(path):
+    """Raise OSError unless a file can be created beside ``path``."""
+    path = Path(path)
+    fd, probe = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.',
+                                 suffix='.probe')
+    os.close(fd)
+    os.unlink(probe)
+
+
 @contextlib.contextmanager
 def atomic_write(path, mode='wb', **kwargs):
     """

@@ -20,12 +20,11 @@ import contextlib
 import math
 import os
 from pathlib import Path
-import tempfile
 import time
 
 import numpy as np
 
-from ..core.atomic import atomic_write
+from ..core.atomic import atomic_write, probe_folder
 from ..core.rssi import clip_plausible, plausible
 from ..core.scan import normalize_ap_id
 from .columns import NOT_DETECTED_MARKER
@@ -75,10 +74,7 @@ def _check_folder(path):
         raise RecordingError(f'output {path}: cannot create the '
                              f'folder {folder} ({reason})') from None
     try:
-        fd, probe = tempfile.mkstemp(dir=folder, prefix=f'.{path.name}.',
-                                     suffix='.probe')
-        os.close(fd)
-        os.unlink(probe)
+        probe_folder(path)
     except OSError as exc:
         raise RecordingError(
             f'output {path}: cannot write in the folder {folder} '
