@@ -241,16 +241,21 @@ class ClassifierNode(Node):
         self._publish_answer(status, stamp)
         confident = status.level == DiagnosticStatus.OK
         fusing = self.odometry is not None and self.odometry.active
+        key = (place.building, place.floor)
         reasons = self.changes.follow(place, confident, stamp,
-                                      self._frame(place), jumps=not fusing)
+                                      self._frame(key), jumps=not fusing)
         if place.position is None:
             return
         reasons = reasons if self.reseed_on_change else []
-        if fusing:
-            self._fuse(place, stamp, confident, reasons)
-        else:
+        if not fusing:
             self._forget_pending()
-            self._publish_pose(place, stamp, confident, reasons)
+        if confident and self._send_initial_pose:
+            self._send_initial_pose = False
+            reasons = reasons + ['requested']
+        if fusing:
+            self._fuse(place, key, stamp, confident, reasons)
+        else:
+            self._publish_pose(place, key, stamp, reasons)
 
     def _publish_answer(self, status, stamp):
         out = DiagnosticArray(status=[status])
@@ -268,10 +273,10 @@ class ClassifierNode(Node):
                 _kv('scan_sigma_m', f'{place.scan_sigma:.3f}')]
 
     def _frame(self, place):
-        return self.frame_id.format(building=place.building,
-                                    floor=place.floor)
+        """Return the frame of ``place`` (building, floor)."""
+        return self.frame_id.format(building=place[0], floor=place[1])
 
-    def _fuse(self, place, stamp, confident, reasons):
+    def _fuse(self, place, key, stamp, confident, reasons):
         """
         Feed the scan's own position to the filter; initialpose waits.
 
@@ -281,14 +286,10 @@ class ClassifierNode(Node):
         after a change of floor, the filter's start there (at the second
         confident answer in a row), never the old floor's pose.
         """
-        if confident and self._send_initial_pose:
-            self._send_initial_pose = False
-            reasons = reasons + ['requested']
         if reasons:
             self._initial_pending = (stamp_time(stamp, self.get_clock()),
-                                     reasons, (place.building, place.floor))
-        self.odometry.scan(stamp, place.scan_position,
-                           (place.building, place.floor), confident)
+                                     reasons, key)
+        self.odometry.scan(stamp, place.scan_position, key, confident)
 
     def _forget_pending(self):
         """Fusion stopped before a re-seed went out: a request waits on."""
@@ -307,8 +308,8 @@ class ClassifierNode(Node):
         as when the robot is carried away, or it ran on WiFi alone for
         long), which with fusion stands for the scans' own jumps.
         """
-        frame = self.frame_id.format(building=place[0], floor=place[1])
-        pose = pose_message(fused.xy, fused.cov, stamp, frame, fused.yaw)
+        pose = pose_message(fused.xy, fused.cov, stamp, self._frame(place),
+                            fused.yaw)
         self.pose_pub.publish(pose)
         waiting, reasons = self._initial_pending, None
         if waiting is not None and fused.stamp >= waiting[0] and \
@@ -317,28 +318,25 @@ class ClassifierNode(Node):
         elif relocated and self.reseed_on_change:
             reasons = ['the fused pose started afresh']
         if reasons:
-            self.initial_pose_pub.publish(pose)
-            self.get_logger().info(
-                f'initialpose sent ({"; ".join(reasons)}): building '
-                f'{place[0]}, floor {place[1]}, x {fused.xy[0]:.2f}, y '
-                f'{fused.xy[1]:.2f}, yaw {math.degrees(fused.yaw):.0f} deg '
-                f'in {frame} (fused with odometry)')
+            self._send_initial(pose, reasons, place, f'fused with odometry, '
+                               f'yaw {math.degrees(fused.yaw):.0f} deg')
 
-    def _publish_pose(self, place, stamp, confident, reasons):
+    def _publish_pose(self, place, key, stamp, reasons):
         pose = pose_message(place.position, place.position_cov, stamp,
-                            self._frame(place))
+                            self._frame(key))
         self.pose_pub.publish(pose)
-        if confident and self._send_initial_pose:
-            self._send_initial_pose = False
-            reasons = reasons + ['requested']
         if reasons:
-            self.initial_pose_pub.publish(pose)
-            self.get_logger().info(
-                f'initialpose sent ({"; ".join(reasons)}): building '
-                f'{place.building}, floor {place.floor}, x '
-                f'{place.position[0]:.2f}, y {place.position[1]:.2f} in '
-                f'{pose.header.frame_id} (sigma {place.position_sigma:.1f} '
-                f'm)')
+            self._send_initial(pose, reasons, key,
+                               f'sigma {place.position_sigma:.1f} m')
+
+    def _send_initial(self, pose, reasons, place, how):
+        """Publish ``pose`` on initialpose; log why, where and ``how``."""
+        self.initial_pose_pub.publish(pose)
+        p = pose.pose.pose.position
+        self.get_logger().info(
+            f'initialpose sent ({"; ".join(reasons)}): building {place[0]}, '
+            f'floor {place[1]}, x {p.x:.2f}, y {p.y:.2f} in '
+            f'{pose.header.frame_id} ({how})')
 
     def _reject(self, status, reason, detail, stamp):
         self.counts['rejected'] += 1
