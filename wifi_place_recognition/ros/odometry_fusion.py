@@ -8,10 +8,11 @@ time the node takes the message). Fused poses go to ``publish(fused,
 stamp, place, relocated)``: one per scan, stamped with the scan's stamp,
 and ``pose_rate`` times a second between scans while odometry moves on;
 ``relocated`` when the filter started afresh on the place it was on (the
-scans kept disagreeing with it, or WiFi alone for long). A timer lets a scan that
-waited ``odom_timeout`` seconds for odometry through alone. Odometry faults
-(:data:`.core.fusion.ODOMETRY_FAULTS`) are counted and logged (throttled);
-the health status is WARN while odometry is faulty or stale.
+scans kept disagreeing with it, or WiFi alone for long). A timer lets a
+scan that waited ``odom_timeout`` seconds for odometry through alone.
+Odometry faults (:data:`.core.fusion.ODOMETRY_FAULTS`) are counted and
+logged (throttled); the health status is WARN while odometry is faulty or
+stale. An error inside the filter is counted and logged, never raised.
 """
 
 import copy
@@ -99,11 +100,15 @@ class OdometryFusion:
 
     def scan(self, stamp, xy, place, confident):
         """Feed the answer to one scan; publish the poses it releases."""
+        self._guarded('on a scan', self._scan, stamp, xy, place, confident)
+
+    def _guarded(self, where, step, *args):
+        """Run ``step``; an error is counted and logged, never raised."""
         try:
-            self._scan(stamp, xy, place, confident)
-        except Exception as exc:   # never let one scan stop the node
+            step(*args)
+        except Exception as exc:   # never let the filter stop the node
             self.counts_internal += 1
-            self._problem(f'internal error on a scan: {exc!r}')
+            self._problem(f'internal error {where}: {exc!r}')
 
     def _scan(self, stamp, xy, place, confident):
         seconds = stamp_time(stamp, self._node.get_clock())
@@ -126,13 +131,8 @@ class OdometryFusion:
                 del self._stamps[key]
 
     def _on_odometry(self, msg):
-        if not self.enabled:
-            return
-        try:
-            self._odometry(msg)
-        except Exception as exc:   # never let one message stop the node
-            self.counts_internal += 1
-            self._problem(f'internal error on odometry: {exc!r}')
+        if self.enabled:
+            self._guarded('on odometry', self._odometry, msg)
 
     def _odometry(self, msg):
         pose = msg.pose.pose
@@ -153,18 +153,16 @@ class OdometryFusion:
         self._emit(fused)
 
     def _on_timer(self):
-        if not self.enabled:
-            return
-        try:
-            self._expire(time.monotonic())
-            if self.pose_rate and \
-                    self.fusion.odometry_stamp != self._published_stamp:
-                pose = self.fusion.pose()
-                if pose is not None:
-                    self._emit([pose])
-        except Exception as exc:   # never let the timer stop the node
-            self.counts_internal += 1
-            self._problem(f'internal error in the fusion timer: {exc!r}')
+        if self.enabled:
+            self._guarded('in the fusion timer', self._tick)
+
+    def _tick(self):
+        self._expire(time.monotonic())
+        if self.pose_rate and \
+                self.fusion.odometry_stamp != self._published_stamp:
+            pose = self.fusion.pose()
+            if pose is not None:
+                self._emit([pose])
 
     def _expire(self, now):
         """Publish the scans that waited too long, fused alone; say so."""
