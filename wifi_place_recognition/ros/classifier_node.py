@@ -41,7 +41,8 @@ from std_srvs.srv import Trigger
 from ..core.artifact import load_model, ModelFileError
 from .classifier_parameters import (check_frame, declare, no_position,
                                     RECOGNIZER_SETTINGS, refusal)
-from .messages import key_value as _kv, pose_message, stamp_time
+from .messages import (key_value as _kv, pose_message, stamp_time,
+                       yaw_text)
 from .odometry_fusion import OdometryFusion
 from .place_changes import PlaceChanges
 from .runner import names_the_node, run
@@ -318,8 +319,8 @@ class ClassifierNode(Node):
         elif relocated and self.reseed_on_change:
             reasons = ['the fused pose started afresh']
         if reasons:
-            self._send_initial(pose, reasons, place, f'fused with odometry, '
-                               f'yaw {math.degrees(fused.yaw):.0f} deg')
+            self._send_initial(pose, reasons, place,
+                               f'fused with odometry, {yaw_text(pose)}')
 
     def _publish_pose(self, place, key, stamp, reasons):
         pose = pose_message(place.position, place.position_cov, stamp,

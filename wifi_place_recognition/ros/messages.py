@@ -34,8 +34,9 @@ def pose_message(xy, cov, stamp, frame_id, yaw=None):
     """
     Return a PoseWithCovarianceStamped at x, y (and ``yaw``, rad).
 
-    ``cov``: 2x2 over x, y; with ``yaw``, 3x3 over x, y, yaw. Without a
-    yaw, its variance is :data:`UNKNOWN_VARIANCE`.
+    ``cov``: 2x2 over x, y; with ``yaw``, 3x3 over x, y, yaw. A yaw whose
+    variance is :data:`UNKNOWN_VARIANCE` is no yaw: without one, the
+    orientation is the identity and its variance :data:`UNKNOWN_VARIANCE`.
     """
     pose = PoseWithCovarianceStamped()
     pose.header.stamp = stamp
@@ -43,6 +44,8 @@ def pose_message(xy, cov, stamp, frame_id, yaw=None):
     pose.pose.pose.position.x = float(xy[0])
     pose.pose.pose.position.y = float(xy[1])
     cov = np.asarray(cov, float)
+    if yaw is not None and cov[2, 2] >= UNKNOWN_VARIANCE:
+        yaw = None
     covariance = [0.0] * 36
     for i in (14, 21, 28, 35):  # z, roll, pitch, yaw: unknown
         covariance[i] = UNKNOWN_VARIANCE
@@ -80,6 +83,13 @@ def yaw_of(orientation):
     q = orientation
     return math.atan2(2 * (q.w * q.z + q.x * q.y),
                       1 - 2 * (q.y * q.y + q.z * q.z))
+
+
+def yaw_text(pose):
+    """Return a PoseWithCovarianceStamped's yaw as text: degrees or unknown."""
+    if pose.pose.covariance[35] >= UNKNOWN_VARIANCE:
+        return 'yaw unknown'
+    return f'yaw {math.degrees(yaw_of(pose.pose.pose.orientation)):.0f} deg'
 
 
 def status_values(status):

@@ -7,8 +7,10 @@ status with ``building``, ``floor``, ``frame_id`` and ``confidence``; the
 header stamp is that of the scan that changed it), latched (reliable,
 transient local, depth 1): one message per change, and a subscriber that
 starts late gets the current place at once. It also says when a localiser
-should be re-seeded: a confident answer on another building/floor than the
-last confident one, or whose position jumped (:func:`.step_sigmas`).
+should be re-seeded: at the second confident answer in a row on another
+building/floor than the last confident one (a single wrong scan does not
+switch maps, whatever the model and its tracking), or at a confident
+answer whose position jumped (:func:`.step_sigmas`).
 """
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -28,6 +30,7 @@ class PlaceChanges:
     def __init__(self, node, jump_threshold):
         self.jump_threshold = jump_threshold
         self.place = None             # (building, floor), last confident
+        self._candidate = None        # another place, confident once
         self._last_position = None    # ((building, floor), xy, cov)
         self._name = f'{node.get_name()}: current place'
         self._logger = node.get_logger()
@@ -42,7 +45,8 @@ class PlaceChanges:
         frame. A jump is a position more than ``jump_threshold`` standard
         deviations from the previous answer's on the same floor (not a
         reason with ``jumps`` False: the odometry fusion judges those).
-        Only a confident answer changes the place or gives reasons.
+        Only a confident answer changes the place or gives reasons, and
+        a new place only at its second confident answer in a row.
         """
         key = (place.building, place.floor)
         reasons = []
@@ -55,6 +59,10 @@ class PlaceChanges:
             self._last_position = (key, place.position, place.position_cov)
         if not confident:
             return []
+        if self.place not in (None, key) and key != self._candidate:
+            self._candidate = key
+            return []
+        self._candidate = None
         if key != self.place:
             if self.place is not None:
                 reasons.insert(0, 'building {}, floor {} before'.format(
