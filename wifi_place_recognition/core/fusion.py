@@ -14,7 +14,7 @@ message was refused): a non-finite pose or a stamp before the previous
 one is counted and skipped; a jump faster than ``max_speed`` /
 ``max_turn_rate`` (a reset to zero, a teleport) is counted and the filter
 continues from the jumped pose as if the robot had not moved; a stamp
-more than ``odom_timeout`` before the previous one (a clock restarted) is
+more than ``clock_reset`` before the previous one (a clock restarted) is
 counted and starts a new odometry timeline. A stamp equal to the previous
 one is skipped and counted as no fault (the next pose carries its
 motion). A scan that waited ``odom_timeout`` seconds (on the clock of its
@@ -32,7 +32,8 @@ import math
 
 import numpy as np
 
-from .particles import ParticleFilter, wrap
+from .particles import ParticleFilter, WifiPosition, wrap
+from .track_misfit import TrackMisfit
 
 #: Why odometry or a scan was not applied (counted in ``Fusion.counts``).
 ODOMETRY_FAULTS = ('odometry_invalid', 'odometry_out_of_order',
@@ -43,7 +44,10 @@ ODOMETRY_FAULTS = ('odometry_invalid', 'odometry_out_of_order',
 class FusionLimits:
     """What the timeline accepts, and how it steps (seconds, m, rad)."""
 
-    odom_timeout: float = 1.0     # s: odometry older than this is stale
+    odom_timeout: float = 1.0     # s: a scan waits this long for odometry
+    clock_reset: float = 1.0      # s: a stamp this far back: a new timeline
+    move_lag: float = 1.0         # s: particles move up to this far behind
+    #                               the newest odometry (a scan on its way)
     max_speed: float = 3.0        # m/s: faster is a jump
     max_turn_rate: float = 6.0    # rad/s: faster is a jump
     step_m: float = 0.5           # move the particles every this far
@@ -100,6 +104,7 @@ class Fusion:
 
     def __init__(self, params=None, limits=None, seed=0):
         self.filter = ParticleFilter(params, seed)
+        self.misfit = TrackMisfit(self.filter.params.track_s)
         self.limits = limits or FusionLimits()
         self.counts = Counter()
         self.reset()
@@ -114,6 +119,7 @@ class Fusion:
         self._candidate = None  # a confident scan's other place, once
         self.last_scan = None   # stamp of the last scan applied
         self.filter.state = None
+        self.misfit.clear()
 
     @property
     def odometry_stamp(self):
@@ -135,7 +141,7 @@ class Fusion:
             if dt == 0:     # the next pose carries its motion
                 self.counts['odometry_same_stamp'] += 1
                 return None, []
-            if dt < -self.limits.odom_timeout:     # a new timeline
+            if dt < -self.limits.clock_reset:     # a new timeline
                 self._reanchor(pose)
                 return self._fault('odometry_clock_reset'), []
             if dt <= 0:
@@ -160,7 +166,8 @@ class Fusion:
         if self.anchor is not None:
             self.anchor = pose
 
-    def scan(self, stamp, xy, place, confident=True, arrival=None):
+    def scan(self, stamp, xy, place, confident=True, arrival=None,
+             sigma=None):
         """
         Take one scan's answer; return the fused poses now available.
 
@@ -168,8 +175,9 @@ class Fusion:
         row of another place restarts the filter there, any other scan of
         another place is not applied (its pose is the filter's).
         ``arrival``: when it arrived, on the clock :meth:`expire` is given
-        (default: its stamp). A scan without a finite position is refused
-        (counted, None returned).
+        (default: its stamp). ``sigma``: the scan's own (m; None: not
+        known). A scan without a finite position is refused (counted,
+        None returned).
         """
         xy = np.asarray(xy, np.float64)
         if not (xy.shape == (2,) and np.isfinite(xy).all() and
@@ -182,7 +190,8 @@ class Fusion:
         apply = not moved or (confident and self._candidate == place)
         self._candidate = place if moved and confident else None
         self.pending.append((float(stamp), xy, place if apply else None,
-                             float(stamp if arrival is None else arrival)))
+                             float(stamp if arrival is None else arrival),
+                             sigma))
         self.pending.sort(key=lambda item: item[0])
         return self._advance()
 
@@ -196,7 +205,7 @@ class Fusion:
         while self.pending and \
                 now - self.pending[0][3] > self.limits.odom_timeout and \
                 not self._covered(self.pending[0][0]):
-            out.append(self._apply(*self.pending.pop(0)[:3], odometry=False))
+            out.append(self._apply(self.pending.pop(0), odometry=False))
         return [pose for pose in out if pose is not None] + self._advance()
 
     def _covered(self, stamp):
@@ -206,12 +215,12 @@ class Fusion:
         """Apply the pending scans that odometry covers, in stamp order."""
         out = []
         while self.pending and self._covered(self.pending[0][0]):
-            out.append(self._apply(*self.pending.pop(0)[:3], odometry=True))
+            out.append(self._apply(self.pending.pop(0), odometry=True))
         out = [pose for pose in out if pose is not None]
         if not self.pending and self.anchor is not None and self.odom:
             # not up to the newest: a scan still on its way lands after it
             target = self._odometry_at(self.odom[-1][0] -
-                                       self.limits.odom_timeout)
+                                       self.limits.move_lag)
             step = relative(self.anchor[1:], target[1:])
             if target[0] > self.anchor[0] and (
                     math.hypot(step[0], step[1]) >= self.limits.step_m or
@@ -240,8 +249,9 @@ class Fusion:
         while len(self.odom) > 2 and self.odom[1][0] <= pose[0]:
             self.odom.popleft()
 
-    def _apply(self, stamp, xy, place, odometry):
-        """Apply one scan (``place`` None: only move to it); its pose."""
+    def _apply(self, scan, odometry):
+        """Apply one pending scan (place None: only move to it); its pose."""
+        stamp, xy, place, _, sigma = scan
         if place is None and not self.filter.started:
             return None
         restart = place is not None and (not self.filter.started or
@@ -268,8 +278,14 @@ class Fusion:
         if restart:
             self.filter.start(xy)
             self.place = place
-        if place is not None and self.filter.update(xy):
-            restart = True
+        if not odometry or restart:     # the scans' track starts again
+            self.misfit.clear()
+        if place is not None:
+            misfit = self.misfit.add(stamp, xy, self.anchor[1:3]) \
+                if odometry else None
+            if self.filter.update(WifiPosition(xy, sigma, misfit)):
+                restart = True
+                self.misfit.clear()
         self.counts['restarts'] += restart
         self.last_scan = stamp
         self.counts['scans_fused' if odometry else 'scans_alone'] += 1

@@ -10,14 +10,18 @@ laser scan:
   Each particle also carries a heading drift (rad per metre driven): wheel
   odometry's heading often loses a steady angle per metre (a calibration
   bias), and the particles that carry the right drift survive;
-- :class:`WifiSensorModel`: a scan's position as a Gaussian likelihood,
-  with a floor for outliers;
+- :class:`WifiSensorModel`: a scan's position (:class:`WifiPosition`) as
+  a Gaussian likelihood as wide as the scan is trusted, with a floor for
+  outliers;
 - :class:`ParticleFilter`: start from a scan (unknown heading), move,
   weigh, resample when the effective sample size falls, and start afresh
   when the scans keep disagreeing with the particles (a kidnapped robot).
+  It takes its sensor model as a piece: another (e.g. a per-AP radio
+  map) needs the same four methods (``width``, ``centre``,
+  ``disagrees``, ``likelihood``) and its own measurement type.
 """
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 import math
 
 import numpy as np
@@ -46,7 +50,7 @@ class FusionParams(SectionParams):
 
     SECTION = 'fusion'
     POSITIVE = ('particles', 'wifi_sd', 'wifi_outlier', 'start_sd',
-                'reset_sigmas', 'reset_after')
+                'reset_sigmas', 'reset_after', 'track_s')
     SIGNED = ('drift_mean',)
 
     particles: int = 3000
@@ -56,7 +60,10 @@ class FusionParams(SectionParams):
     drift_mean: float = 0.0           # rad per m: the heading drift expected
     drift_sd: float = 0.04            # rad per m: spread of the drift prior
     drift_walk: float = 0.002         # rad per m, per sqrt(m) driven
-    wifi_sd: float = 4.0              # m: a scan position's likelihood width
+    wifi_sd: float = 4.0              # m: a scan position's least width
+    sigma_scale: float = 0.0          # width at least the scan's sigma x this
+    track_s: float = 30.0             # s: scans compared with odometry
+    track_scale: float = 2.0          # width at least their misfit x this
     wifi_outlier: float = 0.5         # likelihood floor (share of the peak)
     start_sd: float = 3.0             # m: spread of a start around a scan
     reset_sigmas: float = 3.0         # a scan this many sd off disagrees
@@ -135,26 +142,67 @@ class MotionModel:
                            seconds * rng.standard_normal(n))
 
 
+@dataclass(frozen=True)
+class WifiPosition:
+    """One scan's k-NN position, as :class:`WifiSensorModel` weighs it."""
+
+    xy: np.ndarray             # (2,) m, map frame
+    sigma: float = None        # m: the scan's own (None: not known)
+    misfit: float = None       # m: the recent scans' (:class:`TrackMisfit`)
+
+
 class WifiSensorModel:
     """
     The likelihood of a particle's position given one scan's position.
 
-    A Gaussian of ``wifi_sd`` metres around the scan's k-NN position, over
-    a floor of ``wifi_outlier`` (a scan placed far off does not wipe out
-    the particles). The width is one figure, not the scan's own sigma: the
-    k-NN's errors along a run are correlated, and its sigma is calibrated
-    on folds whose errors differ from a new run's.
+    A Gaussian around the scan's k-NN position over a floor of
+    ``wifi_outlier`` (a scan placed far off does not wipe out the
+    particles). Its width is the scan's trust: at least ``wifi_sd``, at
+    least the scan's own sigma times ``sigma_scale``, and at least the
+    recent scans' misfit to odometry times ``track_scale``: where the
+    survey has no scan, the k-NN snaps to the nearest surveyed stretch
+    for as long as the robot is away from it, its errors along the run are
+    not independent, and scans that move unlike the robot are trusted
+    less, so the pose follows odometry there.
     """
 
     def __init__(self, params):
         self.params = params
 
-    def likelihood(self, state, xy):
-        """Return how likely each particle is, given a scan at ``xy`` (peak 1)."""
+    def width(self, scan):
+        """Return how wide (m) a :class:`WifiPosition` is weighed."""
         p = self.params
-        d2 = ((state[:, :2] - xy) ** 2).sum(axis=1)
-        return (1 - p.wifi_outlier) * \
-            np.exp(-d2 / (2 * p.wifi_sd * p.wifi_sd)) + p.wifi_outlier
+        width = p.wifi_sd
+        if scan.sigma is not None and math.isfinite(scan.sigma):
+            width = max(width, p.sigma_scale * scan.sigma)
+        if scan.misfit is not None:
+            width = max(width, p.track_scale * scan.misfit)
+        return width
+
+    def centre(self, scan):
+        """Return where a start from ``scan`` spreads its particles."""
+        return scan.xy
+
+    def disagrees(self, estimate, scan):
+        """
+        Return True when ``scan`` lies reset_sigmas sd off ``estimate``.
+
+        With the scan's width before its misfit: scans that jump away from
+        odometry for good (a kidnapped robot) keep disagreeing.
+        """
+        width = self.width(replace(scan, misfit=None))
+        cov = estimate.cov[:2, :2] + np.eye(2) * width ** 2
+        delta = scan.xy - estimate.xy
+        return delta @ np.linalg.solve(cov, delta) > \
+            self.params.reset_sigmas ** 2
+
+    def likelihood(self, state, scan):
+        """Return how likely each particle is, given ``scan`` (peak 1)."""
+        p = self.params
+        width = self.width(scan)
+        d2 = ((state[:, :2] - scan.xy) ** 2).sum(axis=1)
+        return (1 - p.wifi_outlier) * np.exp(-d2 / (2 * width * width)) + \
+            p.wifi_outlier
 
 
 class ParticleFilter:
@@ -165,10 +213,10 @@ class ParticleFilter:
     :meth:`update` per scan; :meth:`estimate` for the pose.
     """
 
-    def __init__(self, params=None, seed=0):
+    def __init__(self, params=None, seed=0, sensor=None):
         self.params = params or FusionParams()
         self.motion = MotionModel(self.params)
-        self.sensor = WifiSensorModel(self.params)
+        self.sensor = sensor or WifiSensorModel(self.params)
         self._seed = seed
         self._rng = None
         self.state = None
@@ -216,30 +264,26 @@ class ParticleFilter:
         """Let ``seconds`` pass without odometry."""
         self.motion.spread(self.state, seconds, self.rng)
 
-    def update(self, xy):
+    def update(self, scan):
         """
-        Weigh the particles by a scan at ``xy`` (m); return True on a restart.
+        Weigh the particles by a measurement; return True on a restart.
 
-        After ``reset_after`` scans in a row farther than ``reset_sigmas``
-        standard deviations (the particles' spread and ``wifi_sd``
-        together) from the estimate, the filter starts afresh at the scan:
+        ``scan``: what the sensor model weighs (a :class:`WifiPosition`).
+        After ``reset_after`` scans in a row that the sensor model finds
+        too far from the estimate, the filter starts afresh at the scan:
         the robot was carried away (kidnapped), or the filter went wrong.
         """
-        p = self.params
-        estimate = self.estimate()
-        cov = estimate.cov[:2, :2] + np.eye(2) * p.wifi_sd ** 2
-        delta = np.asarray(xy) - estimate.xy
-        if delta @ np.linalg.solve(cov, delta) > p.reset_sigmas ** 2:
+        if self.sensor.disagrees(self.estimate(), scan):
             self.disagreeing += 1
         else:
             self.disagreeing = 0
-        if self.disagreeing >= p.reset_after:
-            self.start(xy)
+        if self.disagreeing >= self.params.reset_after:
+            self.start(self.sensor.centre(scan))
             return True
-        self.weight = self.weight * self.sensor.likelihood(self.state, xy)
+        self.weight = self.weight * self.sensor.likelihood(self.state, scan)
         total = self.weight.sum()
         if not (math.isfinite(total) and total > 0):    # nothing fits
-            self.start(xy)
+            self.start(self.sensor.centre(scan))
             return True
         self.weight /= total
         if 1.0 / (self.weight ** 2).sum() < len(self.weight) / 2:

@@ -28,13 +28,14 @@ def fuse_offline(odometry, scans, fusion=None):
     """
     Return the fused pose at every scan: (xy (n, 2), yaw (n,), cov (n, 3, 3)).
 
-    ``odometry``: (m, 4) rows of stamp, x, y, yaw; ``scans``: stamps (n,)
-    and xy (n, 2), both in stamp order, as the node would receive
+    ``odometry``: (m, 4) rows of stamp, x, y, yaw; ``scans``: stamps (n,),
+    xy (n, 2) and optionally each scan's sigma (n,), in stamp order, as the node would receive
     them (a scan is taken after odometry of the same stamp). Scans with no
     odometry at all are applied alone. NaN where a scan gave no pose.
     """
     fusion = fusion or Fusion()
-    stamps, xy = scans
+    stamps, xy = scans[:2]
+    sigma = scans[2] if len(scans) > 2 else [None] * len(stamps)
     n = len(stamps)
     out_xy, out_yaw = np.full((n, 2), np.nan), np.full(n, np.nan)
     out_cov = np.full((n, 3, 3), np.nan)
@@ -51,7 +52,7 @@ def fuse_offline(odometry, scans, fusion=None):
             keep(fusion.expire(odometry[o, 0]))
             o += 1
         if np.isfinite(xy[i]).all():
-            keep(fusion.scan(stamps[i], xy[i], (0, 0)))
+            keep(fusion.scan(stamps[i], xy[i], (0, 0), sigma=sigma[i]))
     for row in odometry[o:]:
         keep(fusion.odometry(*row)[1])
     keep(fusion.expire(math.inf))

@@ -290,7 +290,8 @@ class ClassifierNode(Node):
         if reasons:
             self._initial_pending = (stamp_time(stamp, self.get_clock()),
                                      reasons, key)
-        self.odometry.scan(stamp, place.scan_position, key, confident)
+        self.odometry.scan(stamp, place.scan_position, key, confident,
+                           place.scan_sigma)
 
     def _forget_pending(self):
         """Fusion stopped before a re-seed went out: a request waits on."""

@@ -98,9 +98,10 @@ class OdometryFusion:
         self._stamps.clear()
         self._place = None
 
-    def scan(self, stamp, xy, place, confident):
+    def scan(self, stamp, xy, place, confident, sigma=None):
         """Feed the answer to one scan; publish the poses it releases."""
-        self._guarded('on a scan', self._scan, stamp, xy, place, confident)
+        self._guarded('on a scan', self._scan, stamp, xy, place, confident,
+                      sigma)
 
     def _guarded(self, where, step, *args):
         """Run ``step``; an error is counted and logged, never raised."""
@@ -110,7 +111,7 @@ class OdometryFusion:
             self.counts_internal += 1
             self._problem(f'internal error {where}: {exc!r}')
 
-    def _scan(self, stamp, xy, place, confident):
+    def _scan(self, stamp, xy, place, confident, sigma):
         seconds = stamp_time(stamp, self._node.get_clock())
         now = time.monotonic()
         timeout = self.fusion.limits.odom_timeout
@@ -118,7 +119,8 @@ class OdometryFusion:
         self._stamps[seconds] = stamp
         released = self.fusion.scan(
             seconds, xy, place, confident,
-            now - 2 * timeout if stale else now)  # stale: no waiting
+            now - 2 * timeout if stale else now,  # stale: no waiting
+            sigma)
         if released is None:
             del self._stamps[seconds]
             self._problem('a scan without a finite position: not fused')

@@ -1,0 +1,135 @@
+"""
+Scans that odometry says the robot cannot have produced (no ROS).
+
+Where the survey has no scan, the k-NN positions snap to the nearest
+surveyed stretch, or jump, for tens of seconds while the robot drives
+on: :class:`TrackMisfit` sees it, the sensor model trusts those scans
+less, and the pose follows odometry; a kidnapped robot still restarts.
+"""
+
+import math
+
+import numpy as np
+from wifi_place_recognition.core.fusion import Fusion
+from wifi_place_recognition.core.particles import (FusionParams,
+                                                   WifiPosition,
+                                                   WifiSensorModel)
+from wifi_place_recognition.core.track_misfit import TrackMisfit
+from wifi_place_recognition.core.trajectory import fuse_offline
+
+SPEED = 0.5     # m/s
+
+
+def drive(seconds=240.0):
+    """
+    Return (odometry rows at 10 Hz, scan stamps at 1 Hz, true xy).
+
+    East for half the time, a quarter turn left in 10 s, then north;
+    odometry exact, in a frame turned from the map's.
+    """
+    t = np.arange(0.0, seconds + 0.05, 0.1)
+    yaw = np.clip((t - seconds / 2) / 10.0, 0.0, 1.0) * math.pi / 2
+    step = np.diff(t, prepend=0.0) * SPEED
+    x = np.cumsum(step * np.cos(yaw))
+    y = np.cumsum(step * np.sin(yaw))
+    turn = 2.0      # the odometry frame's heading in the map
+    c, s = math.cos(turn), math.sin(turn)
+    odometry = np.column_stack([t, c * x - s * y, s * x + c * y, yaw + turn])
+    stamps = np.arange(0.5, seconds, 1.0)
+    truth = np.column_stack([np.interp(stamps, t, x),
+                             np.interp(stamps, t, y)])
+    return odometry, stamps, truth
+
+
+def noisy(truth, seed=0, sd=1.0):
+    """Return scans around the truth (independent errors of ``sd`` m)."""
+    return truth + np.random.default_rng(seed).normal(0, sd, truth.shape)
+
+
+def test_the_misfit_is_small_for_scans_that_follow_the_robot():
+    odometry, stamps, truth = drive()
+    track = TrackMisfit(30.0)
+    rotated = truth @ np.array([[0.0, 1.0], [-1.0, 0.0]])   # any heading
+    scans = noisy(rotated + [50.0, -20.0])
+    misfits = [track.add(s, xy, o) for s, xy, o in
+               zip(stamps, scans, truth)]
+    assert misfits[:4] == [None] * 4      # too few scans to say
+    assert np.median(misfits[10:]) < 2.0      # about the scans' noise
+    assert np.max(misfits[10:]) < 5.0
+
+
+def test_the_misfit_is_large_for_scans_that_stand_while_the_robot_drives():
+    odometry, stamps, truth = drive()
+    track = TrackMisfit(30.0)
+    snapped = np.repeat(truth[:1], len(truth), axis=0)   # a surveyed spot
+    misfits = [track.add(s, xy, o) for s, xy, o in
+               zip(stamps, snapped, truth)]
+    assert min(misfits[30:]) > 3.0
+    assert TrackMisfit(30.0).add(0.0, [0.0, 0.0], [0.0, 0.0]) is None
+
+
+def test_a_scan_is_as_wide_as_it_is_trusted():
+    sensor = WifiSensorModel(FusionParams(sigma_scale=2.0, track_scale=3.0))
+    xy = np.zeros(2)
+    assert sensor.width(WifiPosition(xy)) == 4.0            # wifi_sd
+    assert sensor.width(WifiPosition(xy, sigma=3.0)) == 6.0
+    assert sensor.width(WifiPosition(xy, sigma=math.nan)) == 4.0
+    assert sensor.width(WifiPosition(xy, 1.0, misfit=5.0)) == 15.0
+
+
+def snapped(truth, stamps, start=100.0, seconds=30.0):
+    """
+    Return scans that stay where the survey ends for ``seconds``.
+
+    From ``start`` the robot drives 15 m into an uncovered stretch; its
+    scans keep snapping to the last surveyed spot.
+    """
+    scans = noisy(truth)
+    inside = (stamps >= start) & (stamps < start + seconds)
+    scans[inside] = noisy(np.repeat(truth[inside][:1], inside.sum(), 0), 1)
+    return scans, inside
+
+
+def run_filter(params, odometry, stamps, scans, seed=0):
+    return fuse_offline(odometry, (stamps, scans), Fusion(params, seed=seed))
+
+
+def test_through_an_uncovered_stretch_the_pose_follows_odometry():
+    odometry, stamps, truth = drive()
+    scans, inside = snapped(truth, stamps, start=40.0)   # a young filter
+    xy, _, cov = run_filter(FusionParams(), odometry, stamps, scans)
+    error = np.linalg.norm(xy - truth, axis=1)
+    assert error[inside].max() < 2.0      # the scans were up to 15 m off
+    # the scans taken as independent, as before: dragged towards them
+    xy, _, _ = run_filter(FusionParams(track_scale=0.0), odometry, stamps,
+                          scans)
+    assert np.linalg.norm(xy - truth, axis=1)[inside].max() > 2.5
+    # the ellipse grows through the stretch, then shrinks again
+    spread = np.sqrt(cov[:, 0, 0] + cov[:, 1, 1])
+    before = spread[np.flatnonzero(inside)[0] - 1]
+    assert spread[inside].max() > before
+    assert spread[-1] < spread[inside].max()
+
+
+def test_a_run_of_scans_that_jumped_does_not_drag_the_pose():
+    odometry, stamps, truth = drive()
+    scans = noisy(truth)
+    jumped = (stamps >= 100) & (stamps < 110)   # 8 m off within 2 s
+    scans[jumped] += [0.0, 8.0]
+    xy, _, _ = run_filter(FusionParams(), odometry, stamps, scans)
+    error = np.linalg.norm(xy - truth, axis=1)
+    assert error[jumped].max() < 2.0
+    # scans that stay off longer than track_s are the robot's track
+    # (a kidnap): the filter follows them or restarts there
+
+
+def test_a_kidnapped_robot_still_restarts_where_the_scans_are():
+    odometry, stamps, truth = drive()
+    scans = noisy(truth)
+    scans[stamps >= 120] += [30.0, 20.0]     # carried off; odometry on
+    fusion = Fusion(seed=0)
+    xy, _, _ = fuse_offline(odometry, (stamps, scans), fusion)
+    error = np.linalg.norm(xy - (truth + np.where(
+        stamps[:, None] >= 120, [30.0, 20.0], 0.0)), axis=1)
+    assert fusion.counts['restarts'] >= 2
+    assert error[stamps >= 180].max() < 3.0

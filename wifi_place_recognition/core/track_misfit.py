@@ -1,0 +1,65 @@
+"""
+How well a robot's recent scans move as its odometry says (ROS-free).
+
+A scan's trust, from what the robot knows at run time: where the survey
+has no scan, the k-NN positions snap to the nearest surveyed stretch (or
+jump) while odometry says the robot drives on; where it has, they follow
+the robot. :class:`TrackMisfit` measures the difference over the last
+seconds; :class:`.particles.WifiSensorModel` widens a scan by it.
+"""
+
+import math
+
+import numpy as np
+
+
+class TrackMisfit:
+    """
+    How far the recent scans' positions are from moving as odometry says.
+
+    The scans of the last ``track_s`` seconds and the odometry poses at
+    their stamps: the odometry track turned and shifted onto the scans'
+    track (least squares, heading unknown), and what is left: its root
+    mean square, or the newest scan's if larger (a scan that leaves the
+    track is trusted less at once). Scans that snap to a surveyed stretch while the robot
+    drives elsewhere, or jump while it stands, leave metres; scans that
+    follow the robot leave about their own noise.
+    """
+
+    #: Fewer scans, or a shorter odometry track (m): no figure.
+    MIN_SCANS = 5
+    MIN_PATH = 2.0
+
+    def __init__(self, seconds):
+        self.seconds = seconds
+        self.track = []     # (stamp, scan x, y, odometry x, y)
+
+    def clear(self):
+        """Forget the track (a restart, a gap in odometry)."""
+        self.track = []
+
+    def add(self, stamp, xy, odometry):
+        """
+        Add a scan and the odometry (x, y) at its stamp; return the misfit.
+
+        None while the track is too short to say (:data:`MIN_SCANS`,
+        :data:`MIN_PATH`).
+        """
+        self.track.append((stamp, xy[0], xy[1], odometry[0], odometry[1]))
+        while self.track[0][0] < stamp - self.seconds:
+            self.track.pop(0)
+        if len(self.track) < self.MIN_SCANS:
+            return None
+        track = np.asarray(self.track)
+        scans, odo = track[:, 1:3], track[:, 3:5]
+        if np.linalg.norm(np.diff(odo, axis=0), axis=1).sum() < \
+                self.MIN_PATH:
+            return None
+        scans = scans - scans.mean(axis=0)
+        odo = odo - odo.mean(axis=0)
+        h = odo.T @ scans
+        angle = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
+        c, s = math.cos(angle), math.sin(angle)
+        turned = odo @ np.array([[c, s], [-s, c]])
+        left = np.linalg.norm(scans - turned, axis=1)
+        return float(max(np.sqrt((left ** 2).mean()), left[-1]))
