@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from ros_helpers import Client, NodeProcess
 from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.ros import classifier_parameters
 
 PROBE = (['WAP001', 'WAP002', 'WAP003', 'WAP004'], [-60.0, -70.0, -80.0, -50.0])
 SHIPPED = Path('share', 'wifi_place_recognition', 'models', 'ujiindoorloc.npz')
@@ -193,22 +194,40 @@ def _calls(tree, name):
 def test_launch_file_declares_described_arguments_it_uses():
     # launch and launch_ros are not on PyPI: check the file's structure.
     tree = ast.parse((REPO / 'launch' / 'classifier.launch.py').read_text())
+    parameters, = [ast.literal_eval(node.value) for node in tree.body
+                   if isinstance(node, ast.Assign) and
+                   node.targets[0].id == 'PARAMETERS']
     declared = {}
     for call in _calls(tree, 'DeclareLaunchArgument'):
         kwargs = {k.arg: k.value for k in call.keywords}
-        name = call.args[0].value
-        assert isinstance(kwargs.get('description'), ast.Constant) and \
-            len(kwargs['description'].value) > 20, name
-        assert 'default_value' in kwargs, name
-        declared[name] = kwargs['default_value']
-    used = {call.args[0].value for call in _calls(tree, 'LaunchConfiguration')}
-    assert set(declared) == used == {'params_file', 'scan_topic',
-                                     'odom_topic'}
+        assert 'default_value' in kwargs, ast.dump(call)
+        if isinstance(call.args[0], ast.Constant):
+            name = call.args[0].value
+            assert isinstance(kwargs.get('description'), ast.Constant) and \
+                len(kwargs['description'].value) > 20, name
+            declared[name] = kwargs['default_value']
+        else:   # one per PARAMETERS entry, empty: the params file's value
+            assert kwargs['default_value'].value == ''
+            declared.update({name: kwargs['default_value']
+                             for name in parameters})
+    assert all(len(text) > 20 for text in parameters.values()), parameters
+    # the parameters set from arguments are the node's, of the same name
+    node_parameters = {p[0] for p in classifier_parameters.PARAMETERS}
+    assert set(parameters) <= node_parameters, parameters
+    used = {call.args[0].value for call in _calls(tree, 'LaunchConfiguration')
+            if isinstance(call.args[0], ast.Constant)}
+    assert set(declared) == used | set(parameters) == {
+        'params_file', 'scan_topic', 'odom_topic', 'initialpose_topic',
+        'model_path', 'tracking', 'frame_id', 'publish_initial_pose',
+        'initial_pose_on_change'}
     assert declared['scan_topic'].value == 'wifi/scan'
     assert declared['odom_topic'].value == 'odom'
+    assert declared['initialpose_topic'].value == 'initialpose'
     config = [a.value for a in ast.walk(declared['params_file'])
               if isinstance(a, ast.Constant)]
     assert (REPO / config[-2] / config[-1]).is_file(), config
     node, = _calls(tree, 'Node')
     kwargs = {k.arg: k.value for k in node.keywords}
     assert kwargs['executable'].value == 'classifier_node'
+    remapped = [pair.elts[0].value for pair in kwargs['remappings'].elts]
+    assert remapped == ['wifi/scan', 'odom', 'initialpose'], remapped
