@@ -17,6 +17,8 @@ console_scripts = [
     'wifi_place_recognition.ros.executables:wifi_scanner_node',
     'record_fingerprints = '
     'wifi_place_recognition.ros.executables:record_fingerprints',
+    'localization_monitor = '
+    'wifi_place_recognition.ros.executables:localization_monitor',
 ]
 # `ros2 run` runs <prefix>/lib/<package>/<executable>. colcon's builds
 # (setup.py install / develop) put the console scripts there by setup.cfg;

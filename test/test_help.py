@@ -16,6 +16,7 @@ from conftest import REPO, run, wait_until
 import pytest
 from rcl_interfaces.srv import ListParameters
 from wifi_place_recognition.ros import (classifier_parameters,
+                                        monitor_parameters,
                                         recorder_parameters,
                                         scanner_parameters)
 from wifi_place_recognition.ros.node_interface import interface_type
@@ -23,7 +24,8 @@ from wifi_place_recognition.ros.node_interface import interface_type
 BIN = Path(sys.executable).parent
 TABLES = {'classifier_node': classifier_parameters,
           'wifi_scanner_node': scanner_parameters,
-          'record_fingerprints': recorder_parameters}
+          'record_fingerprints': recorder_parameters,
+          'localization_monitor': monitor_parameters}
 
 
 def _console_scripts():
@@ -178,6 +180,7 @@ NODES = {
     'wifi_scanner_node': ['-p', 'interface:=lo', '-p', 'sources:=[nmcli]'],
     'record_fingerprints': ['-p', 'pose_topic:=/amcl_pose',
                             '-p', 'odom_topic:=odom'],
+    'localization_monitor': [],     # the shipped model
 }
 
 

@@ -85,3 +85,8 @@ def wifi_scanner_node():
 def record_fingerprints():
     """Run ``record_fingerprints``; return its exit code."""
     return _main('record_fingerprints', 'recorder_parameters')
+
+
+def localization_monitor():
+    """Run ``localization_monitor``; return its exit code."""
+    return _main('localization_monitor', 'monitor_parameters')

@@ -1,0 +1,270 @@
+"""
+localization_monitor over real ROS: a localiser judged against the WiFi pose.
+
+The test plays the localiser (``amcl_pose``) and classifier_node (its fused
+``~/pose``) from this process, on stamps one second apart (the monitor
+judges by stamps, so a minute of driving takes a second or two); the
+monitor runs in its own process (the shipped model's survey). The robot
+drives along x at 0.5 m/s; the fused pose is the truth with 0.5 m and 3
+degrees of spread. Checked: the latched ``~/localization_ok``, the status
+on ``/diagnostics``, and ``initialpose``.
+"""
+
+import math
+
+from conftest import python_module, wait_until
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseWithCovarianceStamped
+import numpy as np
+import pytest
+from ros_helpers import NodeProcess, RELIABLE
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool
+from wifi_place_recognition.ros.messages import status_values, yaw_of
+
+T0 = 5000.0
+SPEED = 0.5
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def pose(t, x, y, yaw, frame='map', sd=0.1, yaw_sd=0.05):
+    """Return a PoseWithCovarianceStamped at stamp ``t`` (s)."""
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = frame
+    msg.header.stamp.sec = int(math.floor(t))
+    msg.header.stamp.nanosec = int(round((t - math.floor(t)) * 1e9))
+    msg.pose.pose.position.x = float(x)
+    msg.pose.pose.position.y = float(y)
+    msg.pose.pose.orientation.z = math.sin(yaw / 2)
+    msg.pose.pose.orientation.w = math.cos(yaw / 2)
+    cov = [0.0] * 36
+    cov[0] = cov[7] = sd ** 2
+    cov[14] = cov[21] = cov[28] = 1e6
+    cov[35] = yaw_sd ** 2
+    msg.pose.covariance = cov
+    return msg
+
+
+def truth(k):
+    """Return the true (x, y, yaw) at step ``k``."""
+    return 10.0 + SPEED * k, 20.0, 0.0
+
+
+class Monitor:
+    """A localization_monitor process and the test's side of its topics."""
+
+    def __init__(self, ros, tmp_path, name, *params):
+        self.ros, self.name = ros, name
+        self.proc = NodeProcess(tmp_path, python_module(
+            'ros.localization_monitor', '--ros-args', *params), name)
+        self.verdicts, self.initial, self.status = [], [], []
+        self.seen_local = False
+        self.local = ros.create_publisher(PoseWithCovarianceStamped,
+                                          'amcl_pose', RELIABLE)
+        self.fused = ros.create_publisher(PoseWithCovarianceStamped,
+                                          'classifier_node/pose', RELIABLE)
+        self.subs = [
+            ros.create_subscription(Bool, f'/{name}/localization_ok',
+                                    lambda m: self.verdicts.append(m.data),
+                                    LATCHED),
+            ros.create_subscription(PoseWithCovarianceStamped,
+                                    '/initialpose', self.initial.append,
+                                    RELIABLE),
+            ros.create_subscription(DiagnosticArray, '/diagnostics',
+                                    self._on_diag, RELIABLE)]
+        assert wait_until(lambda: self.local.get_subscription_count() and
+                          self.fused.get_subscription_count() and
+                          all(s.get_publisher_count() for s in self.subs) and
+                          self.verdicts, 60, ros), self.proc.stop()[1]
+
+    def _on_diag(self, msg):
+        self.status += [status_values(s) for s in msg.status
+                        if s.name == f'{self.name}: localization']
+
+    def spin(self, seconds=0.03):
+        wait_until(lambda: False, seconds, self.ros)
+
+    def step(self, k, local=None, fused=None, frame='map', fused_sd=0.5):
+        """Send step ``k``: the localiser's pose (if any), then the fused."""
+        if local is not None:
+            self.send_local(pose(T0 + k, *local, frame=frame))
+        rng = np.random.default_rng(k)
+        x, y, yaw = fused if fused is not None else truth(k)
+        dx, dy = rng.normal(0, 0.3, 2)
+        self.fused.publish(pose(T0 + k, x + dx, y + dy, yaw + rng.normal(
+            0, math.radians(2)), sd=fused_sd, yaw_sd=math.radians(3)))
+        self.spin()
+
+    def send_local(self, msg):
+        """Send a localiser pose; the first: wait until the monitor has it."""
+        self.local.publish(msg)
+        self.spin(0.01)
+        if not self.seen_local:     # else a start-up seed may go out
+            assert wait_until(lambda: self.verdicts[-1], 10, self.ros)
+            self.seen_local = True
+
+    def latest_status(self):
+        """Return the newest status values (waits for the next one)."""
+        self.status.clear()
+        assert wait_until(lambda: self.status, 10, self.ros)
+        return self.status[-1]
+
+    def close(self):
+        for sub in self.subs:
+            self.ros.destroy_subscription(sub)
+        self.ros.destroy_publisher(self.local)
+        self.ros.destroy_publisher(self.fused)
+        code, log = self.proc.stop()
+        assert code == 0 and 'Traceback' not in log, log
+        return log
+
+
+@pytest.fixture
+def monitor(ros, tmp_path, request):
+    """Return a function that starts a monitor (closed after the test)."""
+    started = []
+
+    def start(name, *params):
+        started.append(Monitor(ros, tmp_path, name, *params))
+        return started[-1]
+    yield start
+    for m in started:
+        m.close()
+
+
+def test_a_localiser_that_agrees_is_never_judged_lost(monitor, ros):
+    m = monitor('agreeing_monitor', '-p', 'initial_pose_on_lost:=true')
+    for k in range(60):
+        x, y, yaw = truth(k)
+        m.step(k, local=(x + 0.3, y - 0.2, yaw + 0.03))
+    m.spin(0.5)
+    assert m.verdicts[0] is False           # before the first pose
+    assert m.verdicts[1:] == [True], m.verdicts
+    assert not m.initial
+    values = m.latest_status()
+    assert values['localization_ok'] == 'true'
+    assert float(values['agreement_sigma']) < 3, values
+    assert float(values['score']) < 0.5, values
+
+
+def test_a_displaced_localiser_is_lost_and_reseeded_near_the_truth(
+        monitor, ros):
+    m = monitor('displaced_monitor', '-p', 'initial_pose_on_lost:=true')
+    for k in range(20):
+        m.step(k, local=truth(k))
+    assert m.verdicts[-1] is True
+    lost_at = None
+    for k in range(20, 50):         # 15 m off, carried on
+        x, y, yaw = truth(k)
+        m.step(k, local=(x + 12.0, y + 9.0, yaw))
+        if lost_at is None and m.verdicts[-1] is False:
+            lost_at = k
+    assert lost_at is not None and lost_at - 20 <= 15, m.verdicts
+    assert wait_until(lambda: m.initial, 5, ros), 'no initialpose'
+    seed = m.initial[0]
+    k = seed.header.stamp.sec - T0
+    x, y, yaw = truth(k)
+    p = seed.pose.pose
+    assert math.hypot(p.position.x - x, p.position.y - y) < 2.0
+    assert abs(math.degrees(yaw_of(p.orientation) - yaw)) < 15
+    assert seed.header.frame_id == 'map'
+    cov = np.reshape(seed.pose.covariance, (6, 6))
+    assert 0 < cov[0, 0] < 1 and 0 < cov[5, 5] < 0.1
+    values = m.latest_status()
+    assert values['localization_ok'] == 'false'
+    assert float(values['distance_m']) > 10, values
+    assert float(values['disagreeing_for_s']) > 0, values
+    assert int(values['seeds_sent']) == 1
+    # the localiser takes the seed: found again
+    for k in range(50, 60):
+        m.step(k, local=truth(k))
+    assert m.verdicts[-1] is True, m.verdicts
+
+
+def test_a_frozen_localiser_is_lost(monitor, ros):
+    m = monitor('frozen_monitor')
+    for k in range(20):
+        m.step(k, local=truth(k))
+    frozen = truth(20)
+    lost_at = None
+    for k in range(20, 80):         # the robot drives on at 0.5 m/s
+        m.step(k, local=frozen)
+        if lost_at is None and m.verdicts[-1] is False:
+            lost_at = k
+    assert lost_at is not None and lost_at - 20 <= 30, m.verdicts
+    assert not m.initial        # initial_pose_on_lost is false by default
+
+
+def test_a_localiser_on_another_floors_map_is_lost(monitor, ros):
+    m = monitor('floor_monitor', '-p', 'frame_id:=map_f{floor}', '-p',
+                'initial_pose_on_lost:=true')
+    for k in range(10):
+        m.send_local(pose(T0 + k, *truth(k), frame='map_f0'))
+        m.fused.publish(pose(T0 + k, *truth(k), frame='map_f0', sd=0.5,
+                             yaw_sd=0.05))
+        m.spin()
+    assert m.verdicts[-1] is True
+    for k in range(10, 20):         # the lift: WiFi says floor 1
+        m.send_local(pose(T0 + k, *truth(k), frame='map_f0'))
+        m.fused.publish(pose(T0 + k, *truth(k), frame='map_f1', sd=0.5,
+                             yaw_sd=0.05))
+        m.spin()
+    assert m.verdicts[-1] is False, m.verdicts
+    assert wait_until(lambda: m.initial, 5, ros)
+    assert {p.header.frame_id for p in m.initial} == {'map_f1'}
+    values = m.latest_status()
+    assert "frame 'map_f0'" in values['reason'], values
+    assert values['wifi_frame'] == 'map_f1'
+
+
+def test_with_no_localiser_pose_the_sure_fused_pose_seeds_it(monitor, ros):
+    m = monitor('startup_monitor', '-p', 'initial_pose_on_lost:=true')
+    for k in range(10):             # not sure yet: nothing sent
+        m.step(k, fused_sd=3.0)
+    m.spin(0.3)
+    assert not m.initial
+    assert m.latest_status()['localization_ok'] == 'false'
+    for k in range(10, 15):
+        m.step(k, fused_sd=0.5)
+    assert wait_until(lambda: m.initial, 5, ros), 'no initial pose'
+    seed = m.initial[0]
+    assert seed.header.stamp.sec == T0 + 10
+    x, y, _ = truth(10)
+    p = seed.pose.pose.position
+    assert math.hypot(p.x - x, p.y - y) < 2
+    assert len(m.initial) == 1          # holdoff: once
+    assert m.verdicts == [False]
+
+
+def test_bad_localiser_messages_are_counted_named_and_left_out(
+        monitor, ros):
+    m = monitor('bad_input_monitor')
+    for k in range(10):
+        m.step(k, local=truth(k))
+    x, y, yaw = truth(10)
+    bad = {'not_finite': pose(T0 + 10, math.nan, y, yaw),
+           'not_unit_quaternion': pose(T0 + 10, x, y, yaw),
+           'covariance': pose(T0 + 10, x + 20, y, yaw),
+           'unknown_frame': pose(T0 + 10, x + 20, y, yaw, frame='odom'),
+           'stamp_backwards': pose(T0 + 2, x + 20, y, yaw)}
+    bad['not_unit_quaternion'].pose.pose.orientation.w = 0.0
+    bad['covariance'].pose.covariance[0] = -1.0
+    for k in range(10, 25):
+        for msg in bad.values():        # far off, and garbage
+            m.local.publish(msg)
+        m.spin(0.01)
+        m.send_local(pose(T0 + k + 0.5, *truth(k)))
+        m.step(k)
+    m.spin(0.5)
+    assert m.verdicts[1:] == [True], m.verdicts
+    values = m.latest_status()
+    for reason in bad:
+        assert int(values[f'bad_localizer/{reason}']) >= 10, (reason,
+                                                              values)
+    assert int(values['localizer_poses']) == 25, values
+    log = m.close()
+    m.close = lambda: None
+    for text in ('x, y = nan', 'w = 0, 0, 0, 0', "frame 'odom'",
+                 'before the previous one', 'not positive definite'):
+        assert text in log or text.replace('w = ', '') in log, (text, log)

@@ -1,0 +1,203 @@
+"""
+The WiFi witness of a localiser without ROS (core.witness).
+
+Synthetic streams: the robot drives along x at 0.5 m/s, a fused pose and a
+localiser pose every second. Checked: agreement, one bad scan, a
+sustained disagreement, the yaw only when the fused yaw is known, another
+floor's frame, the survey's coverage, a silent localiser, seeds at
+start-up and when lost, bad input refused with a reason.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from wifi_place_recognition.core.particles import UNKNOWN_VARIANCE
+from wifi_place_recognition.core.witness import (judge_offline, pose_problem,
+                                                 Witness, WitnessParams)
+
+SPEED = 0.5
+
+
+def cov(sd=0.5, yaw_sd=math.radians(3)):
+    """Return a 3x3 x, y, yaw covariance."""
+    return np.diag([sd ** 2, sd ** 2, yaw_sd ** 2])
+
+
+def truth(k):
+    """Return (xy, yaw) at second ``k``."""
+    return np.array([SPEED * k, 0.0]), 0.0
+
+
+def drive(witness, steps, local=truth, fused_sd=0.5, yaw_sd=math.radians(3),
+          frame='map', local_frame='map', start=0):
+    """Feed ``steps`` seconds; return the judgements."""
+    out = []
+    for k in range(start, start + steps):
+        if local is not None:
+            xy, yaw = local(k)
+            assert witness.localiser(k, local_frame, xy, yaw,
+                                     cov(0.1, 0.05)) is None
+        xy, yaw = truth(k)
+        j = witness.fused(k, frame, xy, yaw, cov(fused_sd, yaw_sd))
+        if j is not None:
+            out.append(j)
+    return out
+
+
+def test_an_agreeing_localiser_stays_ok_with_no_evidence():
+    w = Witness()
+    judged = drive(w, 60, local=lambda k: (truth(k)[0] + [0.4, -0.3], 0.05))
+    assert len(judged) == 60
+    assert all(j.ok for j in judged) and w.evidence['fused'] == 0
+    assert all(j.sigmas < 1 for j in judged)
+    assert not any(j.seed for j in judged)
+
+
+def test_one_bad_judgement_never_alarms_a_sustained_one_does():
+    p = WitnessParams()
+    w = Witness(p)
+    drive(w, 10)
+    w.localiser(10, 'map', [100.0, 0.0], 0.0, cov(0.1))   # one wild pose
+    w.fused(10, 'map', *truth(10), cov())
+    assert w.ok and 0 < w.evidence['fused'] <= p.max_step
+    drive(w, 10, start=11)
+    assert w.ok and w.evidence['fused'] == 0
+    # sustained: the larger, the sooner
+    delays = []
+    for offset in (6.0, 20.0):
+        w = Witness(p)
+        drive(w, 10)
+        judged = drive(w, 40, local=lambda k: (truth(k)[0] + [0, offset],
+                                               0.0), start=10)
+        delays.append(next(j.stamp for j in judged if j.ok is False) - 10)
+    assert delays[1] < delays[0] <= 15, delays
+    assert delays[1] >= math.ceil(p.alarm / p.max_step) - 1
+
+
+def test_the_yaw_is_compared_only_when_the_fused_yaw_is_known():
+    turned = lambda k: (truth(k)[0], math.radians(90))   # noqa: E731
+    w = Witness()
+    judged = drive(w, 30, local=turned, yaw_sd=math.sqrt(UNKNOWN_VARIANCE))
+    assert all(j.ok for j in judged) and all(math.isnan(j.yaw_deg)
+                                             for j in judged)
+    w = Witness()
+    judged = drive(w, 30, local=turned)
+    assert judged[-1].ok is False
+    assert judged[0].yaw_deg == pytest.approx(90)
+
+
+def test_a_localiser_in_another_floors_frame_is_lost_within_a_few():
+    p = WitnessParams()
+    w = Witness(p)
+    drive(w, 5)
+    judged = drive(w, 10, frame='map_f1', start=5)
+    first = next(i for i, j in enumerate(judged) if j.ok is False)
+    assert first + 1 == math.ceil(p.alarm / p.max_step)
+    assert "'map'" in judged[first].reason and 'map_f1' in judged[first].reason
+
+
+def test_scans_testify_only_on_the_survey_and_when_sure():
+    survey = {'map': np.column_stack([np.arange(0, 50, 0.5),
+                                      np.zeros(100)])}
+    p = WitnessParams()
+
+    def scans(w, dy, sigma, local_dy=0.0):
+        """Localiser at the truth (+ local_dy), scans ``dy`` off it."""
+        for k in range(40):
+            xy, yaw = truth(k)
+            w.localiser(k, 'map', xy + [0, local_dy], yaw, cov(0.1))
+            w.scan(k, 'map', xy + [0, dy], sigma)
+        return w
+    assert scans(Witness(p, survey), 15.0, 1.5).ok is False
+    # a scan unlike every surveyed one (large sigma): no evidence
+    assert scans(Witness(p, survey), 15.0, p.max_scan_sigma + 1).ok
+    # the localiser far from the survey: the scans cannot testify
+    w = scans(Witness(p, survey), 15.0, 1.5, local_dy=-10)
+    assert w.ok and w.evidence['scans'] == 0
+    assert w.last.reason == 'localiser pose off the survey'
+    # and the fused pose is no evidence while the scans are off the survey
+    w = Witness(p, survey)
+    for k in range(40):
+        xy, yaw = truth(k)
+        w.localiser(k, 'map', xy + [0, 15.0], yaw, cov(0.1))
+        w.scan(k, 'map', xy, p.max_scan_sigma + 2)
+        w.fused(k, 'map', xy, yaw, cov())
+    assert w.ok and w.evidence['fused'] == 0
+
+
+def test_a_silent_localiser_is_lost_only_if_the_robot_moved():
+    p = WitnessParams()
+    w = Witness(p)
+    drive(w, 10)
+    judged = drive(w, 60, local=None, start=10)
+    assert judged[-1].ok is False and 'no localiser pose' in \
+        judged[-1].reason
+    w = Witness(p)
+    drive(w, 10)
+    for k in range(10, 70):       # standing still, localiser silent
+        w.fused(k, 'map', *truth(10), cov())
+    assert w.ok
+
+
+def test_seeds_at_start_up_once_sure_and_when_lost_once_per_holdoff():
+    p = WitnessParams(holdoff=30.0)
+    w = Witness(p)
+    judged = drive(w, 5, local=None, fused_sd=3.0)
+    assert not any(j.seed for j in judged) and w.ok is None
+    judged = drive(w, 40, local=None, start=5)
+    seeds = [j for j in judged if j.seed]
+    assert [j.stamp for j in seeds] == [5, 35]     # again after holdoff
+    assert seeds[0].seed.startswith('start-up')
+    assert np.allclose(seeds[0].fused.xy, truth(5)[0])
+    # lost: one seed, the evidence cleared, found once the localiser agrees
+    w = Witness(p)
+    drive(w, 10)
+    judged = drive(w, 20, local=lambda k: (truth(k)[0] + [20, 0], 0.0),
+                   start=10)
+    seeds = [j for j in judged if j.seed]
+    assert len(seeds) == 1 and seeds[0].seed.startswith('lost')
+    assert seeds[0].ok is False
+    assert w.evidence['fused'] == p.alarm       # at most the alarm level
+    judged = drive(w, 15, start=30)
+    found = next(j.stamp for j in judged if j.ok) - 30
+    assert found == math.ceil(p.alarm / p.agree_sigmas) - 1, found
+
+
+def test_bad_poses_are_refused_with_a_reason():
+    assert pose_problem(0.0, [1, 2], 0.0, cov()) is None
+    assert pose_problem(0.0, [1, 2], 0.0, np.diag([1, 1, 1e6])) is None
+    assert 'not finite' in pose_problem(0.0, [math.nan, 2], 0.0, cov())
+    assert 'not symmetric' in pose_problem(
+        0.0, [1, 2], 0.0, cov() + np.triu(np.ones((3, 3)), 1))
+    assert 'positive definite' in pose_problem(
+        0.0, [1, 2], 0.0, np.diag([1.0, -1.0, 1.0]))
+    assert 'positive definite' in pose_problem(
+        0.0, [1, 2], 0.0, np.ones((3, 3)))
+    w = Witness()
+    assert w.localiser(5.0, 'map', [0, 0], 0.0, cov()) is None
+    assert '4.000 s is before' in w.localiser(4.0, 'map', [9, 9], 0.0, cov())
+    assert w.local.stamp == 5.0
+    assert w.fused(6.0, 'map', [math.nan, 0], 0.0, cov()) is None
+    assert w.scan(6.0, 'map', [0, 0], math.inf) is None
+
+
+def test_parameters_are_checked_naming_the_field():
+    with pytest.raises(ValueError, match='alarm = 0'):
+        WitnessParams(alarm=0)
+    with pytest.raises(ValueError, match='floor_sd = nan'):
+        WitnessParams(floor_sd=math.nan)
+    with pytest.raises(ValueError, match='max_step = 30.0 must be below'):
+        WitnessParams(max_step=30.0, alarm=30.0)
+
+
+def test_judge_offline_takes_the_streams_in_stamp_order():
+    t = np.arange(30.0)
+    xy = np.column_stack([SPEED * t, np.zeros(30)])
+    covs = np.repeat(cov()[None], 30, axis=0)
+    fused = (t, xy, np.zeros(30), covs)
+    local = (t + 0.5, xy + [0, 20], np.zeros(30), covs)
+    judged = judge_offline(local, fused)
+    assert judged[0].reason == 'no localiser pose'
+    assert judged[-1].ok is False
+    assert judge_offline(None, fused)[0].seed.startswith('start-up')

@@ -1,0 +1,277 @@
+"""
+``localization_monitor``: is the robot's localiser lost? WiFi as a witness.
+
+Subscribes the localiser's pose (``localizer_topic``, e.g. AMCL's
+``amcl_pose``), classifier_node's fused pose (``fused_topic``) and its
+answers (``place_topic``: each scan's own position and sigma), and feeds
+them to :class:`.core.witness.Witness`, which judges whether they agree
+(see there). Publishes the verdict on the latched ``~/localization_ok``
+(``std_msgs/Bool``, once per change; false until the localiser's first
+pose), a status on ``/diagnostics`` every second, and with
+``initial_pose_on_lost`` the fused pose (as classifier_node published it:
+its frame, pose and covariance) on ``initialpose`` at start-up and when
+the localiser is lost.
+
+A localiser pose that is not finite, has no unit quaternion or no positive
+definite x, y, yaw covariance, is in a frame ``frame_id`` cannot make, or
+is stamped before the previous one is counted by reason, named in a
+throttled warning and left out: never a crash, never a verdict.
+"""
+
+from collections import Counter
+import math
+import re
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseWithCovarianceStamped
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.qos import (DurabilityPolicy, QoSProfile, ReliabilityPolicy)
+from std_msgs.msg import Bool
+
+from ..core.artifact import load_model, ModelFileError
+from ..core.resources import default_model_path
+from ..core.witness import Witness
+from .classifier_parameters import check_frame
+from .messages import key_value as _kv, pose_problem, seconds, yaw_of
+from .monitor_parameters import declare, WITNESS_FIELDS, witness_params
+from .runner import names_the_node, run
+
+THROTTLE_S = 5.0
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+INPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+#: Why a localiser message was refused (counted under these keys).
+BAD_REASONS = ('not_finite', 'not_unit_quaternion', 'covariance',
+               'unknown_frame', 'stamp_backwards')
+
+
+def frame_pattern(template):
+    """Return a regex matching the frames ``template`` makes."""
+    parts = re.split(r'(\{building\}|\{floor\})', template)
+    return re.compile(''.join(r'-?\d+' if p in ('{building}', '{floor}')
+                              else re.escape(p) for p in parts) + r'\Z')
+
+
+def covariance3(covariance):
+    """Return the x, y, yaw 3x3 block of a 6x6 row-major covariance."""
+    c = np.asarray(covariance, np.float64).reshape(6, 6)
+    return c[np.ix_((0, 1, 5), (0, 1, 5))]
+
+
+def survey_of(model, template):
+    """Return {frame: (n, 2) surveyed positions} of a model's classes."""
+    out = {}
+    locator = model.position
+    if locator is None:
+        return None
+    for c, (building, floor) in enumerate(model.classes):
+        frame = template.format(building=building, floor=floor)
+        refs = locator.origin + np.asarray(locator.reference_xy(c),
+                                           np.float64)
+        out[frame] = np.concatenate([out[frame], refs]) if frame in out \
+            else refs
+    return out
+
+
+class LocalizationMonitor(Node):
+    """Judge the localiser's pose against the WiFi witness."""
+
+    @names_the_node
+    def __init__(self, **kwargs):
+        super().__init__('localization_monitor', **kwargs)
+        values = declare(self)
+        self.frame_id = values['frame_id']
+        check_frame(self.frame_id)
+        self.frames = frame_pattern(self.frame_id)
+        self.reseed = values['initial_pose_on_lost']
+        params = witness_params(values)
+        self.model_path = values['model_path'] or str(default_model_path())
+        self.model = load_model(self.model_path)
+        self.witness = Witness(params, survey_of(self.model, self.frame_id))
+        self.counts = Counter(localizer_poses=0, fused_poses=0, scans=0,
+                              seeds_sent=0, bad_fused=0)
+        self.last_fused = None       # the newest fused message
+        self._logged = {}            # bad-input reason -> when logged
+        self.ok_pub = self.create_publisher(Bool, '~/localization_ok',
+                                            LATCHED)
+        self.diag_pub = self.create_publisher(DiagnosticArray,
+                                              '/diagnostics', 10)
+        self.initial_pub = self.create_publisher(
+            PoseWithCovarianceStamped, 'initialpose', 1)
+        self.create_subscription(PoseWithCovarianceStamped,
+                                 values['localizer_topic'],
+                                 self._on_localizer, INPUT_QOS)
+        self.create_subscription(PoseWithCovarianceStamped,
+                                 values['fused_topic'], self._on_fused,
+                                 INPUT_QOS)
+        self.create_subscription(DiagnosticArray, values['place_topic'],
+                                 self._on_place, INPUT_QOS)
+        self.add_on_set_parameters_callback(self._validate)
+        self.add_post_set_parameters_callback(self._apply)
+        self._published = None
+        self._publish_verdict()
+        self.create_timer(1.0, self._publish_status)
+
+    # parameters -----------------------------------------------------------
+    def _validate(self, params):
+        values = {p.name: p.value for p in params}
+        try:
+            witness_params(values, self.witness.params)
+            if 'frame_id' in values:
+                check_frame(values['frame_id'])
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply(self, params):
+        values = {p.name: p.value for p in params}
+        if any(name in WITNESS_FIELDS for name in values):
+            self.witness.params = witness_params(values, self.witness.params)
+        if 'frame_id' in values:
+            self.frame_id = values['frame_id']
+            self.frames = frame_pattern(self.frame_id)
+            self.witness.survey = survey_of(self.model, self.frame_id)
+        self.reseed = values.get('initial_pose_on_lost', self.reseed)
+
+    # inputs ---------------------------------------------------------------
+    def _on_localizer(self, msg):
+        pose = msg.pose.pose
+        frame = msg.header.frame_id
+        reason, problem = None, pose_problem(pose)
+        if problem is not None:
+            reason = 'not_unit_quaternion' if 'quaternion' in problem \
+                else 'not_finite'
+        elif not self.frames.match(frame):
+            reason, problem = 'unknown_frame', (
+                f'frame {frame!r} is not one of frame_id {self.frame_id!r}')
+        else:
+            problem = self.witness.localiser(
+                seconds(msg.header.stamp), frame,
+                (pose.position.x, pose.position.y), yaw_of(pose.orientation),
+                covariance3(msg.pose.covariance))
+            if problem is not None:
+                reason = 'stamp_backwards' if 'before' in problem else \
+                    'covariance' if 'covariance' in problem else 'not_finite'
+        if reason is not None:
+            self.counts[f'bad_localizer/{reason}'] += 1
+            now = time.monotonic()      # each reason named, throttled
+            if now - self._logged.get(reason, -math.inf) >= THROTTLE_S:
+                self._logged[reason] = now
+                self.get_logger().warn(
+                    f'localiser pose refused ({reason}, '
+                    f'{self.counts[f"bad_localizer/{reason}"]} so far): '
+                    f'{problem}')
+            return
+        self.counts['localizer_poses'] += 1
+        self._publish_verdict()
+
+    def _on_fused(self, msg):
+        pose = msg.pose.pose
+        if pose_problem(pose) is not None:
+            self.counts['bad_fused'] += 1
+            return
+        self.counts['fused_poses'] += 1
+        self.last_fused = msg
+        judgement = self.witness.fused(
+            seconds(msg.header.stamp), msg.header.frame_id,
+            (pose.position.x, pose.position.y), yaw_of(pose.orientation),
+            covariance3(msg.pose.covariance))
+        if judgement is None:
+            return
+        if judgement.seed and self.reseed:
+            self._send_seed(msg, judgement.seed)
+        self._publish_verdict(judgement.reason)
+
+    def _on_place(self, msg):
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            try:
+                xy = (float(values['scan_x']), float(values['scan_y']))
+                sigma = float(values['scan_sigma_m'])
+                frame = self.frame_id.format(
+                    building=int(values['building']),
+                    floor=int(values['floor']))
+            except (KeyError, ValueError):
+                continue        # a rejected scan, or no position
+            self.counts['scans'] += 1
+            if self.witness.scan(seconds(msg.header.stamp), frame, xy,
+                                 sigma) is not None:
+                self._publish_verdict(self.witness.last.reason)
+
+    # outputs --------------------------------------------------------------
+    def _send_seed(self, msg, why):
+        self.initial_pub.publish(msg)
+        self.counts['seeds_sent'] += 1
+        p = msg.pose.pose
+        cov = covariance3(msg.pose.covariance)
+        yaw = math.degrees(yaw_of(p.orientation))
+        self.get_logger().info(
+            f'initialpose sent ({why}): x {p.position.x:.2f}, y '
+            f'{p.position.y:.2f}, yaw {yaw:.0f} deg in '
+            f'{msg.header.frame_id} (sd {math.sqrt(cov[0, 0]):.2f} m, '
+            f'{math.degrees(math.sqrt(cov[2, 2])):.1f} deg)')
+
+    def _publish_verdict(self, reason=''):
+        ok = bool(self.witness.ok)
+        if ok == self._published:
+            return
+        self._published = ok
+        self.ok_pub.publish(Bool(data=ok))
+        if self.witness.ok is False:
+            self.get_logger().warn(f'localiser lost: {reason}')
+        elif self.witness.ok:
+            self.get_logger().info('localiser agrees with WiFi')
+
+    def _publish_status(self):
+        w = self.witness
+        last = w.last
+        now = last.stamp if last is not None else 0.0
+        if w.ok is None:
+            level, message = DiagnosticStatus.WARN, 'no localiser pose yet'
+        elif w.ok:
+            level, message = DiagnosticStatus.OK, 'localiser agrees with WiFi'
+        else:
+            level = DiagnosticStatus.ERROR
+            message = f'localiser lost: {last.reason if last else ""}'
+        local = w.local
+        values = [
+            _kv('localization_ok', str(bool(w.ok)).lower()),
+            _kv('agreement_sigma', f'{last.sigmas:.2f}' if last else 'nan'),
+            _kv('distance_m', f'{last.distance_m:.2f}' if last else 'nan'),
+            _kv('yaw_difference_deg', f'{last.yaw_deg:.1f}' if last
+                else 'nan'),
+            _kv('disagreeing_for_s', f'{w.disagreeing_for(now):.1f}'),
+            _kv('score', f'{w.score:.3f}'),
+            _kv('reason', last.reason if last else ''),
+            _kv('localizer_frame', local.frame if local else ''),
+            _kv('wifi_frame', self.last_fused.header.frame_id
+                if self.last_fused else ''),
+        ] + [_kv(k, self.counts.get(k, 0)) for k in
+             ('localizer_poses', 'fused_poses', 'scans', 'seeds_sent',
+              'bad_fused')] + \
+            [_kv(f'bad_localizer/{r}', self.counts.get(f'bad_localizer/{r}',
+                                                       0))
+             for r in BAD_REASONS]
+        out = DiagnosticArray(status=[DiagnosticStatus(
+            level=level, name=f'{self.get_name()}: localization',
+            message=message, hardware_id=local.frame if local else '',
+            values=values)])
+        out.header.stamp = self.get_clock().now().to_msg()
+        self.diag_pub.publish(out)
+
+
+def main(args=None):
+    """Run the node until SIGINT/SIGTERM; exit 1 on a bad start-up."""
+    return run(LocalizationMonitor, args, (ModelFileError, ValueError))
+
+
+if __name__ == '__main__':
+    # As the executable: --help starts nothing (stop signals are caught
+    # only from here, after the imports; the installed executable, earlier)
+    from wifi_place_recognition.ros.executables import \
+        localization_monitor as _run
+    sys.exit(_run())
