@@ -400,6 +400,7 @@ def plots(args):
                   ylabel='building+floor right among them',
                   title=f'{name}: risk-coverage (dot: t = '
                         f'{MIN_CONFIDENCE:g})')
+        right.ticklabel_format(useOffset=False, style='plain')
     figure.tight_layout()
     out = args.json.with_name(f'{args.json.stem}-reliability.png')
     figure.savefig(out, dpi=80)

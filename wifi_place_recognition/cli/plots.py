@@ -88,26 +88,39 @@ def _cdf(plt, folder, error, baseline):
 
 
 def _maps(plt, folder, fp, xy, error):
-    written = []
     vmax = np.quantile(error, 0.95)
-    for b, f in sorted(set(zip(fp.building.tolist(), fp.floor.tolist()))):
-        here = (fp.building == b) & (fp.floor == f)
-        truth, guess = fp.position[here], xy[here]
-        fig, ax = plt.subplots(figsize=(7, 6))
-        ax.plot(np.stack([truth[:, 0], guess[:, 0]]),
-                np.stack([truth[:, 1], guess[:, 1]]), color='0.7', lw=0.6,
-                zorder=1)
-        dots = ax.scatter(truth[:, 0], truth[:, 1], c=error[here], s=12,
-                          cmap='viridis', vmin=0, vmax=vmax, zorder=2)
-        fig.colorbar(dots, ax=ax, label='error (m)')
-        ax.set_aspect('equal')
-        ax.set_xlabel(f'{fp.position_columns[0]} (m)')
-        ax.set_ylabel(f'{fp.position_columns[1]} (m)')
-        ax.set_title(f'building {b}, floor {f}: {here.sum()} scans, mean '
-                     f'error {error[here].mean():.2f} m\n(dot: true '
-                     f'position, line: to the prediction)', fontsize=10)
-        written.append(_save(plt, fig, folder / f'map_B{b}F{f}.png'))
-    return written
+    return [_save(plt, map_figure(plt, fp, xy, error, b, f, vmax),
+                  folder / f'map_B{b}F{f}.png')
+            for b, f in sorted(set(zip(fp.building.tolist(),
+                                       fp.floor.tolist())))]
+
+
+def map_figure(plt, fp, xy, error, building, floor, vmax):
+    """
+    Return the figure of one floor's errors: true positions, lines on.
+
+    The axes count metres from a round origin (named in their labels),
+    not in matplotlib's offset notation (``+4.864e6``).
+    """
+    here = (fp.building == building) & (fp.floor == floor)
+    origin = np.floor(fp.position[here].min(axis=0) / 100) * 100
+    truth, guess = fp.position[here] - origin, xy[here] - origin
+    fig, ax = plt.subplots(figsize=(7, 6))
+    ax.plot(np.stack([truth[:, 0], guess[:, 0]]),
+            np.stack([truth[:, 1], guess[:, 1]]), color='0.7', lw=0.6,
+            zorder=1)
+    dots = ax.scatter(truth[:, 0], truth[:, 1], c=error[here], s=12,
+                      cmap='viridis', vmin=0, vmax=vmax, zorder=2)
+    fig.colorbar(dots, ax=ax, label='error (m)')
+    ax.set_aspect('equal')
+    ax.ticklabel_format(useOffset=False, style='plain')
+    for set_label, name, zero in zip((ax.set_xlabel, ax.set_ylabel),
+                                     fp.position_columns, origin):
+        set_label(f'{name} (m, from {zero:.0f})' if zero else f'{name} (m)')
+    ax.set_title(f'building {building}, floor {floor}: {here.sum()} scans, '
+                 f'mean error {error[here].mean():.2f} m\n(dot: true '
+                 f'position, line: to the prediction)', fontsize=10)
+    return fig
 
 
 def _save(plt, fig, path):
