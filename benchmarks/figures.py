@@ -147,9 +147,10 @@ def draw_panel(out):
                      label='published best' if k == 0 else None)
             top.plot([k - 0.35, k + 0.35], [knn] * 2, color='k', ls=':',
                      lw=1, label='published k-NN' if k == 0 else None)
-    top.set_ylim(ACCURACY_FLOOR - 0.5, 100.3)
+    top.set_ylim(ACCURACY_FLOOR - 0.5, 101)     # room above 100 %
+    top.set_yticks(np.arange(ACCURACY_FLOOR, 100.1, 2))
     top.set_ylabel('building+floor accuracy (%)')
-    top.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1))
+    top.legend(fontsize=8, loc='upper left', bbox_to_anchor=(1.01, 1))
     top.grid(alpha=0.3, axis='y')
     top.set_title('The default on every dataset: test files, seeds 0, 1, 2'
                   '\n(DSI1 has one floor: a position-only model)',
@@ -161,7 +162,7 @@ def draw_panel(out):
               label.startswith('default'))
     bottom.set_ylabel('position mean error (m)')
     bottom.set_ylim(bottom=0)
-    bottom.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1))
+    bottom.legend(fontsize=8, loc='upper left', bbox_to_anchor=(1.01, 1))
     bottom.grid(alpha=0.3, axis='y')
     bottom.set_xticks(np.arange(len(tables)), list(PANEL.values()))
     return _save(fig, out / 'panel.png', PANEL_FILES)
@@ -175,7 +176,7 @@ def draw_confusion(out):
     fig = plt.figure(figsize=(image.shape[1] / DPI, image.shape[0] / DPI))
     fig.figimage(image)
     return _save(fig, out / 'confusion-ujiindoorloc.png', [CONFUSION_FILE],
-                 tight=False)
+                 layout=False, crop=False)
 
 
 def draw_tracking(out):
@@ -203,36 +204,44 @@ def draw_robot(out):
     """Draw ``robot-run.png``; return its path."""
     pairs = {name: pair for name, pair in _load(FUSION_FILE)['pairs'].items()
              if 'trajectory' in pair}
-    fig, axes = plt.subplots(1, len(pairs), figsize=(5 * len(pairs), 5))
+    fig, axes = plt.subplots(1, len(pairs), figsize=(5 * len(pairs), 4.6))
     for ax, (name, pair) in zip(np.atleast_1d(axes), pairs.items()):
         path = {k: np.array(v) for k, v in pair['trajectory'].items()}
-        fused = np.mean([r['mean_m'] for r in pair['fused_fitted']])
         for key, style, label in (
-                ('odometry', dict(color='0.7', lw=1),
-                 f'odometry alone ({pair["odometry"]["mean_m"]:.1f} m)'),
+                ('odometry', dict(color='0.7', lw=1), 'odometry alone'),
                 ('single', dict(color='tab:orange', lw=0, marker='.',
-                                ms=3), f'each scan alone '
-                                       f'({pair["single"]["mean_m"]:.2f} m)'),
+                                ms=3), 'each scan alone (the model)'),
                 ('truth', dict(color='k', lw=2), 'truth (AMCL)'),
                 ('fused', dict(color='tab:blue', lw=1.2),
-                 f'fused ({fused:.2f} m)')):
+                 'fused with odometry')):
             ax.plot(path[key][:, 0], path[key][:, 1], label=label, **style)
         truth = path['truth']
-        pad = 5
+        pad = 3
         ax.set_xlim(truth[:, 0].min() - pad, truth[:, 0].max() + pad)
         ax.set_ylim(truth[:, 1].min() - pad, truth[:, 1].max() + pad)
         ax.set_aspect('equal')
-        ax.set_title(f'{name} (mean error)', fontsize=9)
-        ax.set_xlabel('x (m, map)')
-        ax.legend(fontsize=7, loc='best')
+        test, trained = name.split(' <- ')
+        fused = np.mean([r['mean_m'] for r in pair['fused_fitted']])
+        ax.set_title(f'run {test}, model trained on run {trained}\n'
+                     f'mean error: fused {fused:.2f} m, each scan '
+                     f'{pair["single"]["mean_m"]:.2f} m, odometry '
+                     f'{pair["odometry"]["mean_m"]:.0f} m', fontsize=10)
+        ax.set_xlabel('x (m, map frame)')
+        ax.set_ylabel('y (m, map frame)')
         ax.grid(alpha=0.3)
-    return _save(fig, out / 'robot-run.png', [FUSION_FILE])
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc='lower center', ncol=len(labels),
+               fontsize=10, markerscale=3, frameon=False)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    return _save(fig, out / 'robot-run.png', [FUSION_FILE], layout=False)
 
 
-def _save(fig, path, files, tight=True):
-    if tight:
+def _save(fig, path, files, layout=True, crop=True):
+    """Save ``fig`` with its sources: laid out, its blank margins cropped."""
+    if layout:
         fig.tight_layout()
-    fig.savefig(path, dpi=DPI, metadata={'Source': source(*files)})
+    fig.savefig(path, dpi=DPI, metadata={'Source': source(*files)},
+                bbox_inches='tight' if crop else None, pad_inches=0.05)
     plt.close(fig)
     return path
 
