@@ -51,12 +51,12 @@ def square(start=0.0, laps=1.0):
     return np.array(out[:int(len(out) * laps / math.ceil(laps))])
 
 
-def odometry_of(truth, yaw0=0.7):
+def odometry_of(truth, yaw0=0.7, drift=DRIFT):
     """Return the odometry of a true path: its own frame, drifting yaw."""
     out = [(truth[0, 0], 0.0, 0.0, yaw0)]
     for a, b in zip(truth[:-1], truth[1:]):
         step = math.hypot(b[1] - a[1], b[2] - a[2])
-        turn = math.remainder(b[3] - a[3], 2 * math.pi) - DRIFT * step
+        turn = math.remainder(b[3] - a[3], 2 * math.pi) - drift * step
         t, x, y, yaw = out[-1]
         heading = yaw + turn / 2
         out.append((b[0], x + step * math.cos(heading),

@@ -23,11 +23,15 @@ spread by ``idle_speed`` and ``idle_turn_rate`` per second since the last
 scan, or start afresh at the scan when that spread exceeds a start's.
 Two confident scans in a row of another building/floor restart the filter
 there (a lift); a scan of another place is otherwise not applied, and
-gets the current pose.
+gets the current pose. Each scan is weighed as far as it is trusted: its
+misfit to odometry over the last seconds (:class:`.track_misfit.TrackMisfit`)
+widens it; the scans it widened are counted (``scans_off_track``).
+Between scans the particles move up to ``move_lag`` behind the newest
+odometry.
 """
 
 from collections import Counter, deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -283,7 +287,11 @@ class Fusion:
         if place is not None:
             misfit = self.misfit.add(stamp, xy, self.anchor[1:3]) \
                 if odometry else None
-            if self.filter.update(WifiPosition(xy, sigma, misfit)):
+            scan = WifiPosition(xy, sigma, misfit)
+            sensor = self.filter.sensor
+            self.counts['scans_off_track'] += \
+                sensor.width(scan) > sensor.width(replace(scan, misfit=None))
+            if self.filter.update(scan):
                 restart = True
                 self.misfit.clear()
         self.counts['restarts'] += restart

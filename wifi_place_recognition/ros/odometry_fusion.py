@@ -37,6 +37,7 @@ HEALTH_NAMES = {'odometry': 'odometry_received',
                 'scans_alone': 'fusion_scans_alone',
                 'scans_other_place': 'fusion_scans_other_place',
                 'scans_late': 'fusion_scans_late',
+                'scans_off_track': 'fusion_scans_off_track',
                 'scans_without_position': 'fusion_scans_without_position',
                 'restarts': 'fusion_restarts'}
 #: Scans kept waiting for odometry at most (more: the oldest forgotten).
@@ -197,7 +198,8 @@ class OdometryFusion:
         values = {HEALTH_NAMES.get(k, k): counts.get(k, 0) for k in
                   ('odometry', 'odometry_same_stamp') + ODOMETRY_FAULTS +
                   ('scans_fused', 'scans_alone', 'scans_other_place',
-                   'scans_late', 'scans_without_position', 'restarts')}
+                   'scans_late', 'scans_off_track', 'scans_without_position',
+                   'restarts')}
         values['fusion_internal_errors'] = self.counts_internal
         what, when = self._last_problem
         now = time.monotonic()

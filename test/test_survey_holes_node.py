@@ -1,0 +1,78 @@
+"""
+classifier_node driving through places its survey never covered (DDS).
+
+A scripted drive round surveyed_csv's building with odometry; on one side
+the scans snap to the spot where the survey ends (the robot drives 15 m
+on), and on another they jump 8 m aside for 10 s. The fused ``~/pose``
+follows odometry there, with no jump, its ellipse growing while the
+scans are not trusted; the health counts the scans trusted less.
+"""
+
+import math
+
+from conftest import wait_until
+import numpy as np
+from ros_helpers import running_node
+from test_fusion_node import Drive, health, odometry_of, square
+from test_place_changes import ORIGIN
+
+
+def drive_with_holes(drive, truth, odometry, every=10):
+    """
+    Drive ``truth``; return (true xy, fused xy, fused sd, kind) per scan.
+
+    ``kind``: 'snap' for scans of the uncovered stretch (taken, in the
+    survey's eyes, where it ends), 'jump' for scans 8 m aside, '' else.
+    """
+    out = []
+    snap_from = None
+    for i in range(len(truth)):
+        drive.send_odometry(odometry[i])
+        if i % every != every - 1 or i + 1 >= len(truth):
+            continue
+        drive.send_odometry(odometry[i + 1])     # covers the scan
+        t, x, y, _ = truth[i]
+        since = t - truth[0, 0]
+        kind = ''
+        if 30 <= since < 45:            # the first lap's second side
+            snap_from = snap_from or (x, y)
+            sx, sy, kind = *snap_from, 'snap'
+        elif 130 <= since < 136:        # the second lap's second side
+            sx, sy, kind = x - 8.0, y, 'jump'
+        else:
+            sx, sy = x, y
+        _, pose = drive.scan(t, sx, sy)
+        p = pose.pose.pose.position
+        cov = np.array(pose.pose.covariance).reshape(6, 6)
+        out.append(((x + ORIGIN[0], y + ORIGIN[1]), (p.x, p.y),
+                    math.sqrt(cov[0, 0] + cov[1, 1]), kind))
+    return out
+
+
+def test_the_pose_follows_odometry_where_the_survey_has_no_scan(
+        ros, tmp_path, surveyed_model):
+    with running_node(ros, tmp_path, surveyed_model,
+                      'holes_node') as (client, proc, _):
+        drive = Drive(ros, client, 'holes_node')
+        truth = square(laps=1.8)
+        # odometry without drift: the pose can follow it closely
+        results = drive_with_holes(drive, truth,
+                                   odometry_of(truth, drift=0.0))
+        true = np.array([r[0] for r in results])
+        fused = np.array([r[1] for r in results])
+        sd = np.array([r[2] for r in results])
+        kind = np.array([r[3] for r in results])
+        error = np.linalg.norm(fused - true, axis=1)
+        for k in ('snap', 'jump'):
+            assert (kind == k).sum() >= 5, kind
+            # the scans were up to 15 m (snap) and 8 m (jump) off
+            assert error[kind == k].max() < 2.5, (k, error[kind == k])
+        # no jump: each pose moved about as far as the robot (1 m a scan)
+        steps = np.linalg.norm(np.diff(fused, axis=0), axis=1)
+        inside = (kind[1:] != '') | (kind[:-1] != '')
+        assert steps[inside].max() < 2.0, steps[inside]
+        # the ellipse grows through the stretch the scans are not trusted
+        snap = np.flatnonzero(kind == 'snap')
+        assert sd[snap[-1]] > sd[snap[0] - 1], sd[snap[0] - 1:snap[-1] + 1]
+        assert wait_until(lambda: int(health(client)[
+            'fusion_scans_off_track']) >= 5, 10, ros), health(client)
