@@ -80,6 +80,33 @@ def test_site_builds_with_warnings_as_errors(tmp_path):
     assert (tmp_path / 'html' / 'api' / 'core.html').exists()
 
 
+def test_rosdoc2_builds_the_site_without_warnings(tmp_path):
+    # as docs.ros.org builds a package: the pages, the API and the README
+    env = dict(os.environ, PATH=os.pathsep.join(
+        [str(Path(sys.executable).parent), os.environ['PATH']]))
+    out = run(['rosdoc2', 'build', '--package-path', REPO, '-o',
+               tmp_path / 'out', '-d', tmp_path / 'build'], env=env)
+    log = out.stdout + out.stderr
+    assert out.returncode == 0 and 'WARNING' not in log, log[-5000:]
+    site = tmp_path / 'out' / 'wifi_place_recognition'
+    assert 'class wifi_place_recognition.core.recognizer.PlaceRecognizer' in \
+        re.sub(r'<[^>]+>', '', (site / 'api' / 'core.html').read_text())
+    readme = (site / 'standard_docs' / 'original' / 'README.html').read_text()
+    assert 'src="../../_images/confusion-ujiindoorloc.png"' in readme
+    assert 'href="../../start-here.html"' in readme
+
+
+def test_conf_finds_the_checkout_when_rosdoc2_runs_it(tmp_path):
+    # rosdoc2's conf.py runs ours with exec: __file__ is the wrapper's
+    wrapper = tmp_path / 'wrapped_sphinx_directory' / 'conf.py'
+    wrapper.parent.mkdir()
+    wrapper.write_text(f'exec(open("{DOC / "conf.py"}").read())\n')
+    out = run([sys.executable, '-c', 'import runpy, sys; '
+               f'runpy.run_path("{wrapper}"); print(sys.path[0])'])
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == str(REPO)
+
+
 def test_api_pages_cover_every_module():
     pages = ''.join((DOC / 'api' / f'{p}.md').read_text()
                     for p in ('core', 'data', 'training'))
