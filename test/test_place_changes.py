@@ -76,6 +76,7 @@ def test_a_walk_that_changes_floor_reseeds_nav2_and_latches_the_place(
             answers.append((msg.header.stamp.sec, status_values(status)))
             if i == 2:      # the walk is under way: what came before is
                 del initial[:]  # the probe's place
+                assert wait_until(lambda: places, 10, ros)  # matched late
                 del places[:-1]
             if i == JUMP - 1:   # a map switcher that starts late
                 late = []
