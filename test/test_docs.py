@@ -85,7 +85,8 @@ def test_rosdoc2_builds_the_site_without_warnings(tmp_path):
     env = dict(os.environ, PATH=os.pathsep.join(
         [str(Path(sys.executable).parent), os.environ['PATH']]))
     out = run(['rosdoc2', 'build', '--package-path', REPO, '-o',
-               tmp_path / 'out', '-d', tmp_path / 'build'], env=env)
+               tmp_path / 'out', '-d', tmp_path / 'build', '-c',
+               tmp_path / 'cross_reference'], env=env)
     log = out.stdout + out.stderr
     assert out.returncode == 0 and 'WARNING' not in log, log[-5000:]
     site = tmp_path / 'out' / 'wifi_place_recognition'
