@@ -187,6 +187,25 @@ def test_a_clock_that_restarts_starts_a_new_odometry_timeline():
     assert abs(after.xy[0] - truth[-1, 1] - 10.0) < 2.0
 
 
+def test_the_timeline_s_three_limits_act_apart():
+    # clock_reset alone decides when a stamp back is a new timeline
+    fusion = Fusion(limits=FusionLimits(odom_timeout=5.0, clock_reset=0.5))
+    fusion.odometry(10.0, 0.0, 0.0, 0.0)
+    assert fusion.odometry(9.8, 0.0, 0.0, 0.0)[0] == 'odometry_out_of_order'
+    assert fusion.odometry(9.0, 0.0, 0.0, 0.0)[0] == 'odometry_clock_reset'
+    # move_lag alone decides how far behind the newest odometry the
+    # particles stay between scans
+    for lag in (0.5, 3.0):
+        fusion = Fusion(limits=FusionLimits(move_lag=lag), seed=0)
+        truth, odo = straight(n=100)
+        fusion.odometry(*odo[0])
+        fusion.scan(0.0, [0.0, 0.0], PLACE)
+        for row in odo[1:]:
+            fusion.odometry(*row)
+        assert abs(fusion.anchor[0] - (odo[-1, 0] - lag)) <= 1.0 + 1e-9, \
+            (lag, fusion.anchor[0])
+
+
 def test_the_filter_finds_the_heading_and_follows_a_drifting_odometry():
     """Odometry losing 2 degrees per metre; scans with 1 m noise."""
     drift = math.radians(2.0)
