@@ -6,21 +6,26 @@ The test plays the localiser (``amcl_pose``) and classifier_node (its fused
 judges by stamps, so a minute of driving takes a second or two); the
 monitor runs in its own process (the shipped model's survey). The robot
 drives along x at 0.5 m/s; the fused pose is the truth with 0.5 m and 3
-degrees of spread. Checked: the latched ``~/localization_ok``, the status
+degrees of spread (a kidnap: the scans' own positions on ``~/place``
+instead). Checked: the latched ``~/localization_ok``, the status
 on ``/diagnostics``, and ``initialpose``.
 """
 
 import math
 
 from conftest import python_module, wait_until
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
 import numpy as np
 import pytest
 from ros_helpers import NodeProcess, RELIABLE
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool
-from wifi_place_recognition.ros.messages import status_values, yaw_of
+from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.core.resources import default_model_path
+from wifi_place_recognition.ros.localization_monitor import survey_of
+from wifi_place_recognition.ros.messages import (key_value, status_values,
+                                                 yaw_of)
 
 T0 = 5000.0
 SPEED = 0.5
@@ -122,7 +127,7 @@ class Monitor:
 
 @pytest.fixture
 def monitor(ros, tmp_path, request):
-    """Return a function that starts a monitor (closed after the test)."""
+    """Return a starter of monitors (each closed after the test)."""
     started = []
 
     def start(name, *params):
@@ -235,6 +240,43 @@ def test_with_no_localiser_pose_the_sure_fused_pose_seeds_it(monitor, ros):
     assert math.hypot(p.x - x, p.y - y) < 2
     assert len(m.initial) == 1          # holdoff: once
     assert m.verdicts == [False]
+
+
+def place_answer(t, xy, sigma):
+    """Return a ~/place answer as classifier_node sends it (some keys)."""
+    msg = DiagnosticArray(status=[DiagnosticStatus(
+        name='classifier_node: place', values=[
+            key_value('building', 0), key_value('floor', 0),
+            key_value('scan_x', f'{xy[0]:.3f}'),
+            key_value('scan_y', f'{xy[1]:.3f}'),
+            key_value('scan_sigma_m', f'{sigma:.3f}')])])
+    msg.header.stamp.sec = int(t)
+    return msg
+
+
+def test_scans_far_from_a_surveyed_localiser_pose_tell_a_kidnap(
+        monitor, ros):
+    # the shipped model's survey: the localiser stays on a surveyed spot,
+    # the fused pose with it (the filter has not noticed yet); the scans
+    # say the robot is 15-30 m away, at another surveyed spot
+    refs = survey_of(load_model(default_model_path()), 'map')['map']
+    here = refs[0]
+    far = refs[np.flatnonzero((np.linalg.norm(refs - here, axis=1) > 15) &
+                              (np.linalg.norm(refs - here, axis=1) < 30))[0]]
+    m = monitor('kidnap_monitor')
+    answers = ros.create_publisher(DiagnosticArray, 'classifier_node/place',
+                                   RELIABLE)
+    assert wait_until(lambda: answers.get_subscription_count(), 30, ros)
+    for k in range(40):
+        m.send_local(pose(T0 + k, *here, 0.0))
+        m.fused.publish(pose(T0 + k, *here, 0.0, sd=0.5, yaw_sd=0.05))
+        answers.publish(place_answer(T0 + k, here if k < 10 else far, 1.5))
+        m.spin()
+    ros.destroy_publisher(answers)
+    assert m.verdicts == [False, True, False], m.verdicts
+    values = m.latest_status()
+    assert 'from the WiFi scans' in values['reason'], values
+    assert int(values['scans']) == 40
 
 
 def test_bad_localiser_messages_are_counted_named_and_left_out(
