@@ -5,7 +5,7 @@ For every ordered pair of runs of a building (train on one, localise the
 other), by the documented commands: ``train_model`` on the training run's
 scans, ``fit_odometry`` on the training run's scans and odometry (a copy
 of the model), then the test run's scans (each with its own sigma) and
-odometry in stamp order through :func:`core.trajectory.fuse_offline`
+odometry in stamp order through :func:`core.filter.trajectory.fuse_offline`
 (what classifier_node runs) with the model's fusion parameters: fitted,
 and the defaults (drift not fitted). Started with no prior (the first
 scan, every heading); seeds 0, 1, 2 of the filter.
@@ -45,11 +45,11 @@ import numpy as np
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.evaluation import align
-from wifi_place_recognition.core.fusion import Fusion
+from wifi_place_recognition.core.filter.fusion import Fusion
+from wifi_place_recognition.core.filter.particles import FusionParams
+from wifi_place_recognition.core.filter.trajectory import (
+    fuse_offline, odometry_alone, score)
 from wifi_place_recognition.core.locator import R95
-from wifi_place_recognition.core.particles import FusionParams
-from wifi_place_recognition.core.trajectory import (fuse_offline,
-                                                    odometry_alone, score)
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.poses import read_poses
 

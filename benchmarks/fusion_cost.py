@@ -55,7 +55,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from wifi_place_recognition.core.atomic import atomic_write
-from wifi_place_recognition.core.trajectory import truth_at
+from wifi_place_recognition.core.filter.trajectory import truth_at
 from wifi_place_recognition.core.resources import default_model_path
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.poses import read_poses

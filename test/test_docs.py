@@ -113,9 +113,11 @@ def test_api_pages_cover_every_module():
                     for p in ('core', 'data', 'training'))
     documented = set(re.findall(r'automodule:: (\S+)', pages))
     package = REPO / 'wifi_place_recognition'
-    modules = {f'wifi_place_recognition.{m.parent.name}.{m.stem}'
+    modules = {'.'.join(('wifi_place_recognition',) + m.relative_to(
+        package).with_suffix('').parts).removesuffix('.__init__')
                for p in ('core', 'data', 'training')
-               for m in (package / p).glob('*.py') if m.stem != '__init__'}
+               for m in (package / p).rglob('*.py')
+               if m.parent != package / p or m.stem != '__init__'}
     assert sorted(modules - documented) == [], 'add to doc/api/'
     assert sorted(documented - modules) == [], 'gone: remove from doc/api/'
 

@@ -16,12 +16,13 @@ import pytest
 from test_artifact import _header_and_arrays, _write_npz
 from wifi_place_recognition.core.artifact import (_digest, load_model,
                                                   ModelFileError, save_model)
-from wifi_place_recognition.core.fusion import Fusion, FusionLimits
-from wifi_place_recognition.core.odometry_fit import FitError, fit_odometry
-from wifi_place_recognition.core.particles import FusionParams, wrap
-from wifi_place_recognition.core.trajectory import (dead_reckoning,
-                                                    fuse_offline,
-                                                    odometry_alone, score)
+from wifi_place_recognition.core.filter.angles import wrap
+from wifi_place_recognition.core.filter.fusion import Fusion, FusionLimits
+from wifi_place_recognition.core.filter.odometry_fit import (FitError,
+                                                             fit_odometry)
+from wifi_place_recognition.core.filter.particles import FusionParams
+from wifi_place_recognition.core.filter.trajectory import (
+    dead_reckoning, fuse_offline, odometry_alone, score)
 from wifi_place_recognition.data.files import DataError
 from wifi_place_recognition.data.poses import read_poses
 
@@ -442,7 +443,7 @@ def test_numpy_random_is_imported_only_when_the_filter_starts():
     # about 2 MiB of the node's RSS with fusion off
     # (benchmarks/fusion_cost.py)
     code = ('import sys\n'
-            'from wifi_place_recognition.core.fusion import Fusion\n'
+            'from wifi_place_recognition.core.filter.fusion import Fusion\n'
             'fusion = Fusion()\n'
             'fusion.odometry(1.0, 0.0, 0.0, 0.0)\n'
             'print("numpy.random" in sys.modules)\n'

@@ -10,12 +10,12 @@ less, and the pose follows odometry; a kidnapped robot still restarts.
 import math
 
 import numpy as np
-from wifi_place_recognition.core.fusion import Fusion
-from wifi_place_recognition.core.particles import (FusionParams,
-                                                   WifiPosition,
-                                                   WifiSensorModel)
-from wifi_place_recognition.core.track_misfit import TrackMisfit
-from wifi_place_recognition.core.trajectory import fuse_offline
+from wifi_place_recognition.core.filter.fusion import Fusion
+from wifi_place_recognition.core.filter.particles import FusionParams
+from wifi_place_recognition.core.filter.sensor import (WifiPosition,
+                                                       WifiSensorModel)
+from wifi_place_recognition.core.filter.track_misfit import TrackMisfit
+from wifi_place_recognition.core.filter.trajectory import fuse_offline
 
 SPEED = 0.5     # m/s
 

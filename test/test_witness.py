@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import pytest
-from wifi_place_recognition.core.particles import UNKNOWN_VARIANCE
+from wifi_place_recognition.core.filter.particles import UNKNOWN_VARIANCE
 from wifi_place_recognition.core.witness import (judge_offline, pose_problem,
                                                  Witness, WitnessParams)
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 from ..core.artifact import load_model, save_model
 from ..core.atomic import atomic_write
-from ..core.odometry_fit import fit_odometry
-from ..core.particles import FusionParams
+from ..core.filter.odometry_fit import fit_odometry
+from ..core.filter.particles import FusionParams
 from ..data.poses import read_poses
 from .common import (add_data_arguments, add_model_arguments,
                      check_outputs, data_options, main_wrapper,

@@ -10,8 +10,8 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from ..core.atomic import atomic_write
-from ..core.trajectory import (inside_span, odometry_alone, score,
-                               time_span, truth_at)
+from ..core.filter.trajectory import (inside_span, odometry_alone, score,
+                                      time_span, truth_at)
 from ..data.poses import read_poses
 from ..ros.run_replayer import (arrays, check_spans, ODOMETRY_MARGIN_S,
                                 replay_run, RunReplayOptions)

@@ -20,7 +20,7 @@ from .atomic import atomic_write
 from .locator import LEVELS, Locator, METRICS
 from .model import ACTIVATIONS, Layer, PlaceModel
 from .preprocessing import RssiScaler, SIGNALS
-from .particles import FusionParams
+from .filter.particles import FusionParams
 from .tracking import TrackingParams
 
 FORMAT = 'wifi_place_recognition/model'

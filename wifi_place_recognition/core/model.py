@@ -6,7 +6,7 @@ import numpy as np
 
 from .locator import Locator
 from .preprocessing import RssiScaler
-from .particles import FusionParams
+from .filter.particles import FusionParams
 from .tracking import TrackingParams
 
 

@@ -2,7 +2,7 @@
 Is the robot's localiser lost? WiFi as an independent witness (ROS-free).
 
 :class:`Witness` takes the localiser's poses (e.g. AMCL's), the fused WiFi
-+ odometry poses (:mod:`.fusion`) and the scans' own positions (the k-NN
++ odometry poses (:mod:`.filter.fusion`) and the scans' own positions (the k-NN
 answer) as they arrive, and judges about once per ``period`` seconds of
 their stamps whether they agree. Two witnesses, each with its own
 evidence:
@@ -55,7 +55,8 @@ import math
 
 import numpy as np
 
-from .particles import UNKNOWN_VARIANCE, wrap
+from .filter.angles import wrap
+from .filter.particles import UNKNOWN_VARIANCE
 
 #: Fused poses kept for the distance moved since a localiser stamp.
 HISTORY = 4000

@@ -7,7 +7,7 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from sensor_msgs.msg import JointState
 import numpy as np
 
-from ..core import particles
+from ..core.filter import particles
 
 #: Variance (rad^2) of the unknown yaw, and of z, roll and pitch: WiFi
 #: gives no orientation, and the floor is given by the frame (the

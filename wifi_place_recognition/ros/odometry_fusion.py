@@ -1,5 +1,5 @@
 """
-classifier_node's odometry input: :class:`.core.fusion.Fusion` on ROS.
+classifier_node's odometry input: :class:`.core.filter.fusion.Fusion` on ROS.
 
 Subscribes ``odom`` (``nav_msgs/Odometry``, the pose in the robot's odom
 frame; sensor-data QoS with a deep queue) and feeds it, with each answered
@@ -10,7 +10,7 @@ and ``pose_rate`` times a second between scans while odometry moves on;
 ``relocated`` when the filter started afresh on the place it was on (the
 scans kept disagreeing with it, or WiFi alone for long). A timer lets a
 scan that waited ``odom_timeout`` seconds for odometry through alone.
-Odometry faults (:data:`.core.fusion.ODOMETRY_FAULTS`) are counted and
+Odometry faults (:data:`.core.filter.fusion.ODOMETRY_FAULTS`) are counted and
 logged (throttled); the health status is WARN while odometry is faulty or
 stale. An error inside the filter is counted and logged, never raised.
 """
@@ -23,7 +23,7 @@ import time
 from nav_msgs.msg import Odometry
 from rclpy.qos import qos_profile_sensor_data
 
-from ..core.fusion import Fusion, FusionLimits, ODOMETRY_FAULTS
+from ..core.filter.fusion import Fusion, FusionLimits, ODOMETRY_FAULTS
 from .messages import pose_problem, stamp_time, yaw_of
 
 ODOM_QOS = copy.copy(qos_profile_sensor_data)
@@ -31,7 +31,7 @@ ODOM_QOS.depth = 100
 THROTTLE_S = 5.0
 #: Seconds after a fault or a scan fused alone during which health is WARN.
 WARN_S = 10.0
-#: Names of :class:`.core.fusion.Fusion` counts in the health status.
+#: Names of :class:`.core.filter.fusion.Fusion` counts in the health status.
 HEALTH_NAMES = {'odometry': 'odometry_received',
                 'scans_fused': 'fusion_scans_fused',
                 'scans_alone': 'fusion_scans_alone',

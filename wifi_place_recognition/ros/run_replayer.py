@@ -24,7 +24,7 @@ import numpy as np
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from ..core.trajectory import time_span
+from ..core.filter.trajectory import time_span
 from .messages import scan_message, status_values, yaw_of
 from .replayer import Replayer, unique_stamps
 

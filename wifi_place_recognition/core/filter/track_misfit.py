@@ -5,7 +5,7 @@ A scan's trust, from what the robot knows at run time: where the survey
 has no scan, the k-NN positions snap to the nearest surveyed stretch (or
 jump) while odometry says the robot drives on; where it has, they follow
 the robot. :class:`TrackMisfit` measures the difference over the last
-seconds; :class:`.particles.WifiSensorModel` widens a scan by it.
+seconds; :class:`.sensor.WifiSensorModel` widens a scan by it.
 """
 
 import math

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from .fusion import Fusion, relative
-from .particles import wrap
+from .angles import wrap
 
 #: Chi-square (2 dof) of the 95 % ellipse.
 CHI2_95 = -2 * math.log(0.05)

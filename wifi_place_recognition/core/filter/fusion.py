@@ -36,7 +36,9 @@ import math
 
 import numpy as np
 
-from .particles import ParticleFilter, WifiPosition, wrap
+from .angles import wrap
+from .particles import ParticleFilter
+from .sensor import WifiPosition
 from .track_misfit import TrackMisfit
 
 #: Why odometry or a scan was not applied (counted in ``Fusion.counts``).

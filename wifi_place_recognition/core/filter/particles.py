@@ -1,43 +1,28 @@
 """
 A particle filter over x, y, yaw fed by odometry and WiFi positions.
 
-ROS-free, numpy only; :mod:`.fusion` runs it on stamped streams. The pieces
-are those of nav2_amcl, with a WiFi scan's k-NN position in place of a
-laser scan:
-
-- :class:`MotionModel`: an odometry step (forward, lateral, turn in the
-  robot frame) applied to every particle with noise proportional to it.
-  Each particle also carries a heading drift (rad per metre driven): wheel
-  odometry's heading often loses a steady angle per metre (a calibration
-  bias), and the particles that carry the right drift survive;
-- :class:`WifiSensorModel`: a scan's position (:class:`WifiPosition`) as
-  a Gaussian likelihood as wide as the scan is trusted, with a floor for
-  outliers;
-- :class:`ParticleFilter`: start from a scan (unknown heading), move,
-  weigh, resample when the effective sample size falls, and start afresh
-  when the scans keep disagreeing with the particles (a kidnapped robot).
-  It takes its sensor model as a piece: another (e.g. a per-AP radio
-  map) needs the same four methods (``width``, ``centre``,
-  ``disagrees``, ``likelihood``) and its own measurement type.
+:mod:`.fusion` runs it on stamped streams. :class:`ParticleFilter`
+starts from a scan (unknown heading), moves by the :mod:`.motion` model,
+weighs by its :mod:`.sensor` model (a piece it is given), resamples when
+the effective sample size falls, and starts afresh when the scans keep
+disagreeing with the particles (a kidnapped robot); :class:`FusionParams`
+are the parameters of every piece (a model file's ``fusion`` section).
 """
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 import math
 
 import numpy as np
 
-from .params import SectionParams
+from ..params import SectionParams
+from .angles import wrap
+from .motion import MotionModel
+from .sensor import WifiSensorModel
 
-TWO_PI = 2 * math.pi
 #: Variance (rad^2) of a heading the filter does not know.
 UNKNOWN_VARIANCE = 1e6
 #: Below this mean resultant length of the headings, the yaw is unknown.
 MIN_RESULTANT = 0.5
-
-
-def wrap(angle):
-    """Return ``angle`` (rad) wrapped to [-pi, pi)."""
-    return (np.asarray(angle) + math.pi) % TWO_PI - math.pi
 
 
 @dataclass(frozen=True)
@@ -103,106 +88,6 @@ class Estimate:
     xy: np.ndarray     # (2,) m
     yaw: float         # rad
     cov: np.ndarray    # (3, 3): x, y, yaw
-
-
-class MotionModel:
-    """Move particles by an odometry step, with noise proportional to it."""
-
-    def __init__(self, params):
-        self.params = params
-
-    def move(self, state, forward, lateral, turn, rng):
-        """
-        Apply one odometry step to ``state`` (n, 4: x, y, yaw, drift).
-
-        ``forward``, ``lateral`` (m) and ``turn`` (rad) are the step in the
-        robot frame at its start.
-        """
-        p = self.params
-        n = len(state)
-        distance = math.hypot(forward, lateral)
-        scale = 1 + p.distance_noise * rng.standard_normal(n)
-        turned = turn * (1 + p.turn_noise * rng.standard_normal(n)) + \
-            state[:, 3] * distance + \
-            p.heading_noise * math.sqrt(distance) * rng.standard_normal(n)
-        heading = state[:, 2] + turned / 2
-        cos, sin = np.cos(heading), np.sin(heading)
-        state[:, 0] += scale * (forward * cos - lateral * sin)
-        state[:, 1] += scale * (forward * sin + lateral * cos)
-        state[:, 2] = wrap(state[:, 2] + turned)
-        state[:, 3] += p.drift_walk * math.sqrt(distance) * \
-            rng.standard_normal(n)
-
-    def spread(self, state, seconds, rng):
-        """Spread ``state`` for ``seconds`` without odometry (WiFi alone)."""
-        n = len(state)
-        state[:, :2] += self.params.idle_speed * seconds * \
-            rng.standard_normal((n, 2))
-        state[:, 2] = wrap(state[:, 2] + self.params.idle_turn_rate *
-                           seconds * rng.standard_normal(n))
-
-
-@dataclass(frozen=True)
-class WifiPosition:
-    """One scan's k-NN position, as :class:`WifiSensorModel` weighs it."""
-
-    xy: np.ndarray             # (2,) m, map frame
-    sigma: float = None        # m: the scan's own (None: not known)
-    misfit: float = None       # m: the recent scans' (:class:`TrackMisfit`)
-
-
-class WifiSensorModel:
-    """
-    The likelihood of a particle's position given one scan's position.
-
-    A Gaussian around the scan's k-NN position over a floor of
-    ``wifi_outlier`` (a scan placed far off does not wipe out the
-    particles). Its width is the scan's trust: at least ``wifi_sd``, at
-    least the scan's own sigma times ``sigma_scale``, and at least the
-    recent scans' misfit to odometry times ``track_scale``: where the
-    survey has no scan, the k-NN snaps to the nearest surveyed stretch
-    for as long as the robot is away from it, its errors along the run are
-    not independent, and scans that move unlike the robot are trusted
-    less, so the pose follows odometry there.
-    """
-
-    def __init__(self, params):
-        self.params = params
-
-    def width(self, scan):
-        """Return how wide (m) a :class:`WifiPosition` is weighed."""
-        p = self.params
-        width = p.wifi_sd
-        if scan.sigma is not None and math.isfinite(scan.sigma):
-            width = max(width, p.sigma_scale * scan.sigma)
-        if scan.misfit is not None:
-            width = max(width, p.track_scale * scan.misfit)
-        return width
-
-    def centre(self, scan):
-        """Return where a start from ``scan`` spreads its particles."""
-        return scan.xy
-
-    def disagrees(self, estimate, scan):
-        """
-        Return True when ``scan`` lies reset_sigmas sd off ``estimate``.
-
-        With the scan's width before its misfit: scans that jump away from
-        odometry for good (a kidnapped robot) keep disagreeing.
-        """
-        width = self.width(replace(scan, misfit=None))
-        cov = estimate.cov[:2, :2] + np.eye(2) * width ** 2
-        delta = scan.xy - estimate.xy
-        return delta @ np.linalg.solve(cov, delta) > \
-            self.params.reset_sigmas ** 2
-
-    def likelihood(self, state, scan):
-        """Return how likely each particle is, given ``scan`` (peak 1)."""
-        p = self.params
-        width = self.width(scan)
-        d2 = ((state[:, :2] - scan.xy) ** 2).sum(axis=1)
-        return (1 - p.wifi_outlier) * np.exp(-d2 / (2 * width * width)) + \
-            p.wifi_outlier
 
 
 class ParticleFilter:

@@ -1,0 +1,77 @@
+"""
+The filter's sensor model: a WiFi scan's position, as far as it is trusted.
+
+:class:`WifiPosition` is the measurement (the scan's k-NN position, its
+sigma, its misfit to odometry); :class:`WifiSensorModel` weighs particles
+by it. Another model (e.g. a per-AP radio map) brings its own measurement
+type and the same four methods: ``width``, ``centre``, ``disagrees``,
+``likelihood``.
+"""
+
+from dataclasses import dataclass, replace
+import math
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class WifiPosition:
+    """One scan's k-NN position, as :class:`WifiSensorModel` weighs it."""
+
+    xy: np.ndarray             # (2,) m, map frame
+    sigma: float = None        # m: the scan's own (None: not known)
+    misfit: float = None       # m: the recent scans' (:class:`TrackMisfit`)
+
+
+class WifiSensorModel:
+    """
+    The likelihood of a particle's position given one scan's position.
+
+    A Gaussian around the scan's k-NN position over a floor of
+    ``wifi_outlier`` (a scan placed far off does not wipe out the
+    particles). Its width is the scan's trust: at least ``wifi_sd``, at
+    least the scan's own sigma times ``sigma_scale``, and at least the
+    recent scans' misfit to odometry times ``track_scale``: where the
+    survey has no scan, the k-NN snaps to the nearest surveyed stretch
+    for as long as the robot is away from it, its errors along the run are
+    not independent, and scans that move unlike the robot are trusted
+    less, so the pose follows odometry there.
+    """
+
+    def __init__(self, params):
+        self.params = params
+
+    def width(self, scan):
+        """Return how wide (m) a :class:`WifiPosition` is weighed."""
+        p = self.params
+        width = p.wifi_sd
+        if scan.sigma is not None and math.isfinite(scan.sigma):
+            width = max(width, p.sigma_scale * scan.sigma)
+        if scan.misfit is not None:
+            width = max(width, p.track_scale * scan.misfit)
+        return width
+
+    def centre(self, scan):
+        """Return where a start from ``scan`` spreads its particles."""
+        return scan.xy
+
+    def disagrees(self, estimate, scan):
+        """
+        Return True when ``scan`` lies reset_sigmas sd off ``estimate``.
+
+        With the scan's width before its misfit: scans that jump away from
+        odometry for good (a kidnapped robot) keep disagreeing.
+        """
+        width = self.width(replace(scan, misfit=None))
+        cov = estimate.cov[:2, :2] + np.eye(2) * width ** 2
+        delta = scan.xy - estimate.xy
+        return delta @ np.linalg.solve(cov, delta) > \
+            self.params.reset_sigmas ** 2
+
+    def likelihood(self, state, scan):
+        """Return how likely each particle is, given ``scan`` (peak 1)."""
+        p = self.params
+        width = self.width(scan)
+        d2 = ((state[:, :2] - scan.xy) ** 2).sum(axis=1)
+        return (1 - p.wifi_outlier) * np.exp(-d2 / (2 * width * width)) + \
+            p.wifi_outlier
