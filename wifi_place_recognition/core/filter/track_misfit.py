@@ -8,7 +8,7 @@ the robot. :class:`TrackMisfit` measures the difference over the last
 seconds; :class:`.sensor.WifiSensorModel` widens a scan by it.
 """
 
-import math
+from collections import deque
 
 import numpy as np
 
@@ -32,11 +32,11 @@ class TrackMisfit:
 
     def __init__(self, seconds):
         self.seconds = seconds
-        self.track = []     # (stamp, scan x, y, odometry x, y)
+        self.track = deque()    # (stamp, scan x + y j, odometry x + y j)
 
     def clear(self):
         """Forget the track (a restart, a gap in odometry)."""
-        self.track = []
+        self.track.clear()
 
     def add(self, stamp, xy, odometry):
         """
@@ -45,21 +45,17 @@ class TrackMisfit:
         None while the track is too short to say (:data:`MIN_SCANS`,
         :data:`MIN_PATH`).
         """
-        self.track.append((stamp, xy[0], xy[1], odometry[0], odometry[1]))
+        self.track.append((stamp, complex(xy[0], xy[1]),
+                           complex(odometry[0], odometry[1])))
         while self.track[0][0] < stamp - self.seconds:
-            self.track.pop(0)
+            self.track.popleft()
         if len(self.track) < self.MIN_SCANS:
             return None
-        track = np.asarray(self.track)
-        scans, odo = track[:, 1:3], track[:, 3:5]
-        if np.linalg.norm(np.diff(odo, axis=0), axis=1).sum() < \
-                self.MIN_PATH:
+        _, scans, odo = np.array(self.track).T
+        if np.abs(np.diff(odo)).sum() < self.MIN_PATH:
             return None
-        scans = scans - scans.mean(axis=0)
-        odo = odo - odo.mean(axis=0)
-        h = odo.T @ scans
-        angle = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
-        c, s = math.cos(angle), math.sin(angle)
-        turned = odo @ np.array([[c, s], [-s, c]])
-        left = np.linalg.norm(scans - turned, axis=1)
-        return float(max(np.sqrt((left ** 2).mean()), left[-1]))
+        scans = scans - scans.mean()
+        odo = odo - odo.mean()
+        turn = np.vdot(odo, scans)      # its angle turns odo onto scans
+        left = np.abs(scans - odo * (turn / abs(turn) if turn else 1.0))
+        return float(max(np.sqrt((left * left).mean()), left[-1]))
