@@ -119,13 +119,13 @@ class Fusion:
         """Forget everything but the counts: the next scan starts afresh."""
         self.odom = deque(maxlen=self.limits.history)  # (t, x, y, yaw)
         self.pending = []       # (stamp, xy, place or None: not applied,
-        #                         arrival), in stamp order
+        #                         arrival, sigma), in stamp order
         self.anchor = None      # the odometry pose the particles are at
         self.place = None
         self._candidate = None  # a confident scan's other place, once
         self.last_scan = None   # stamp of the last scan applied
         self.filter.state = None
-        self.misfit.clear()
+        self.misfit.clear()     # the recent scans' track
 
     @property
     def odometry_stamp(self):
