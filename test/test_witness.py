@@ -151,6 +151,7 @@ def test_seeds_at_start_up_once_sure_and_when_lost_once_per_holdoff():
     assert seeds[0].seed.startswith('start-up')
     assert np.allclose(seeds[0].fused.xy, truth(5)[0])
     # lost: one seed, the evidence cleared, found once the localiser agrees
+    p = WitnessParams(holdoff=1000.0)
     w = Witness(p)
     drive(w, 10)
     judged = drive(w, 20, local=lambda k: (truth(k)[0] + [20, 0], 0.0),
@@ -159,7 +160,7 @@ def test_seeds_at_start_up_once_sure_and_when_lost_once_per_holdoff():
     assert len(seeds) == 1 and seeds[0].seed.startswith('lost')
     assert seeds[0].ok is False
     assert w.evidence['fused'] == p.alarm       # at most the alarm level
-    judged = drive(w, 15, start=30)
+    judged = drive(w, 30, start=30)
     found = next(j.stamp for j in judged if j.ok) - 30
     assert found == math.ceil(p.alarm / p.agree_sigmas) - 1, found
 
