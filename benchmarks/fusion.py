@@ -234,33 +234,43 @@ def pair(trained, test):
     return out
 
 
-def spliced(a, b, single_a, single_b):
+def spliced_odometry(a, b, until, since):
     """
-    Return run ``a``'s first part then ``b``'s second, odometry continuous.
+    Return ``a``'s odometry before ``until``, then ``b``'s from ``since``.
 
-    (stamps, truth xy, truth yaw, single xy, odometry, splice stamp): ``b``
-    is shifted in time to follow ``a``, its odometry moved rigidly so
-    that it continues ``a``'s where the two meet.
+    ``b``'s is shifted in time to start at ``until`` and moved rigidly so
+    that it continues ``a``'s where the two meet (what a carried robot's
+    wheels say).
     """
-    i = int(len(a.stamps) * SPLICE_AT)
-    j = int(len(b.stamps) * SPLICE_AT)
-    cut_a, cut_b = a.stamps[i], b.stamps[j]
-    shift = cut_a + 1.0 - cut_b
-    oa = a.odometry[a.odometry[:, 0] < cut_a + 1.0]
-    ob = b.odometry[b.odometry[:, 0] >= cut_b].copy()
-    ob[:, 0] += shift
+    oa = a[a[:, 0] < until]
+    ob = b[b[:, 0] >= since].copy()
+    ob[:, 0] += until - since
     turn = oa[-1, 3] - ob[0, 3]
     c, s = math.cos(turn), math.sin(turn)
     dx, dy = ob[:, 1] - ob[0, 1], ob[:, 2] - ob[0, 2]
     ob[:, 1] = oa[-1, 1] + c * dx - s * dy
     ob[:, 2] = oa[-1, 2] + s * dx + c * dy
-    ob[:, 3] = ob[:, 3] + turn
-    ob = ob[ob[:, 0] > oa[-1, 0]]
+    ob[:, 3] += turn
+    return np.concatenate([oa, ob[ob[:, 0] > oa[-1, 0]]])
+
+
+def spliced(a, b, single_a, single_b):
+    """
+    Return run ``a``'s first part then ``b``'s second, odometry continuous.
+
+    (stamps, truth xy, truth yaw, single xy, odometry, splice stamp): ``b``
+    is shifted in time to follow ``a`` (:func:`spliced_odometry`).
+    """
+    i = int(len(a.stamps) * SPLICE_AT)
+    j = int(len(b.stamps) * SPLICE_AT)
+    cut_a, cut_b = a.stamps[i], b.stamps[j]
+    shift = cut_a + 1.0 - cut_b
     stamps = np.concatenate([a.stamps[:i], b.stamps[j:] + shift])
     return (stamps, np.concatenate([a.xy[:i], b.xy[j:]]),
             np.concatenate([a.yaw[:i], b.yaw[j:]]),
             np.concatenate([single_a[:i], single_b[j:]]),
-            np.concatenate([oa, ob]), cut_a + 1.0)
+            spliced_odometry(a.odometry, b.odometry, cut_a + 1.0, cut_b),
+            cut_a + 1.0)
 
 
 def kidnap(params, a, b, single_a, single_b):

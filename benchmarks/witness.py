@@ -5,7 +5,7 @@ The run's ``poses.csv`` (AMCL's own output) is the localiser. For each run,
 the model is trained by the documented commands on the other runs of its
 building (``train_model`` on their scans, ``fit_odometry`` on the first
 other run), and the run's scans and odometry go through
-:func:`core.trajectory.fuse_offline` (what classifier_node runs), seeds
+:func:`core.filter.trajectory.fuse_offline` (what classifier_node runs), seeds
 0, 1, 2 of the filter: the fused pose at every scan, which
 :func:`core.witness.judge_offline` compares with the localiser's poses
 (what localization_monitor runs). Also with survey holes: before
@@ -59,16 +59,17 @@ import numpy as np
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.evaluation import align
-from wifi_place_recognition.core.fusion import Fusion
-from wifi_place_recognition.core.fusion import compose, relative
-from wifi_place_recognition.core.particles import wrap
-from wifi_place_recognition.core.trajectory import fuse_offline, truth_at
+from wifi_place_recognition.core.filter.angles import wrap
+from wifi_place_recognition.core.filter.fusion import (compose, Fusion,
+                                                       relative)
+from wifi_place_recognition.core.filter.trajectory import (fuse_offline,
+                                                           truth_at)
 from wifi_place_recognition.core.witness import judge_offline, WitnessParams
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.poses import read_poses
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from fusion import survey_holes  # noqa: E402  the same holes
+from fusion import spliced_odometry, survey_holes  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / 'benchmarks' / 'results'
@@ -255,16 +256,7 @@ class Case:
                             (b.stamps < b.stamps[-1] - WINDOW_S))
         cut_b = b.stamps[rng.choice(ok)]
         shift = t0 - cut_b
-        oa = a.odometry[a.odometry[:, 0] < t0]
-        ob = b.odometry[b.odometry[:, 0] >= cut_b].copy()
-        ob[:, 0] += shift
-        turn = oa[-1, 3] - ob[0, 3]
-        c, s = math.cos(turn), math.sin(turn)
-        dx, dy = ob[:, 1] - ob[0, 1], ob[:, 2] - ob[0, 2]
-        ob[:, 1] = oa[-1, 1] + c * dx - s * dy
-        ob[:, 2] = oa[-1, 2] + s * dx + c * dy
-        ob[:, 3] += turn
-        odometry = np.concatenate([oa, ob[ob[:, 0] > oa[-1, 0]]])
+        odometry = spliced_odometry(a.odometry, b.odometry, t0, cut_b)
         ia, ib = a.stamps < t0, b.stamps >= cut_b
         stamps = np.concatenate([a.stamps[ia], b.stamps[ib] + shift])
         sa, sb = scan_stream(model, a), scan_stream(model, b)
