@@ -158,7 +158,7 @@ class ParticleFilter:
         too far from the estimate, the filter starts afresh at the scan:
         the robot was carried away (kidnapped), or the filter went wrong.
         """
-        if self.sensor.disagrees(self.estimate(), scan):
+        if self.sensor.disagrees(*self.position(), scan):
             self.disagreeing += 1
         else:
             self.disagreeing = 0
@@ -183,6 +183,12 @@ class ParticleFilter:
         cumulative[-1] = 1.0
         self.state = self.state[np.searchsorted(cumulative, positions)]
         self.weight = np.full(n, 1.0 / n)
+
+    def position(self):
+        """Return the weighted mean position (2,) and its covariance (2, 2)."""
+        xy = self.weight @ self.state[:, :2]
+        delta = self.state[:, :2] - xy
+        return xy, (delta * self.weight[:, None]).T @ delta
 
     def estimate(self):
         """

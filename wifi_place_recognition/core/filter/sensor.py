@@ -55,16 +55,17 @@ class WifiSensorModel:
         """Return where a start from ``scan`` spreads its particles."""
         return scan.xy
 
-    def disagrees(self, estimate, scan):
+    def disagrees(self, xy, cov, scan):
         """
-        Return True when ``scan`` lies reset_sigmas sd off ``estimate``.
+        Return True when ``scan`` lies reset_sigmas sd off the particles.
 
+        ``xy``, ``cov``: the particles' mean position and its covariance.
         With the scan's width before its misfit: scans that jump away from
         odometry for good (a kidnapped robot) keep disagreeing.
         """
         width = self.width(replace(scan, misfit=None))
-        cov = estimate.cov[:2, :2] + np.eye(2) * width ** 2
-        delta = scan.xy - estimate.xy
+        cov = cov + np.eye(2) * width ** 2
+        delta = scan.xy - xy
         return delta @ np.linalg.solve(cov, delta) > \
             self.params.reset_sigmas ** 2
 
