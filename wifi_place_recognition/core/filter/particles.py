@@ -185,7 +185,7 @@ class ParticleFilter:
         self.weight = np.full(n, 1.0 / n)
 
     def position(self):
-        """Return the weighted mean position (2,) and its covariance (2, 2)."""
+        """Return the particles' weighted mean (x, y) and its covariance."""
         xy = self.weight @ self.state[:, :2]
         delta = self.state[:, :2] - xy
         return xy, (delta * self.weight[:, None]).T @ delta

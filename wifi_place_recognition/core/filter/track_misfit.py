@@ -21,9 +21,9 @@ class TrackMisfit:
     their stamps: the odometry track turned and shifted onto the scans'
     track (least squares, heading unknown), and what is left: its root
     mean square, or the newest scan's if larger (a scan that leaves the
-    track is trusted less at once). Scans that snap to a surveyed stretch while the robot
-    drives elsewhere, or jump while it stands, leave metres; scans that
-    follow the robot leave about their own noise.
+    track is trusted less at once). Scans that snap to a surveyed stretch
+    while the robot drives elsewhere, or jump while it stands, leave
+    metres; scans that follow the robot leave about their own noise.
     """
 
     #: Fewer scans, or a shorter odometry track (m): no figure.
