@@ -133,3 +133,19 @@ def test_a_kidnapped_robot_still_restarts_where_the_scans_are():
         stamps[:, None] >= 120, [30.0, 20.0], 0.0)), axis=1)
     assert fusion.counts['restarts'] >= 2
     assert error[stamps >= 180].max() < 3.0
+
+
+def test_an_odometry_jump_starts_the_scans_track_again():
+    # odometry reset to zero mid-drive: its old frame is not the new one,
+    # so the scans after it are not taken for scans off the track
+    odometry, stamps, truth = drive()
+    jumped = odometry.copy()
+    later = jumped[:, 0] >= 100.0
+    jumped[later, 1:3] -= jumped[later][0, 1:3] + [40.0, 0.0]
+    off = []
+    for odo in (odometry, jumped):
+        fusion = Fusion(seed=0)
+        fuse_offline(odo, (stamps, noisy(truth)), fusion)
+        off.append(fusion.counts['scans_off_track'])
+    assert fusion.counts['odometry_jump'] == 1
+    assert off[1] <= off[0] + 5, off     # the scans' noise alone: off[0]

@@ -166,9 +166,14 @@ class Fusion:
         return reason
 
     def _reanchor(self, pose):
-        """After a jump: continue from ``pose`` as if no motion happened."""
+        """
+        After a jump: continue from ``pose`` as if no motion happened.
+
+        The scans' track starts again: its odometry was in the old frame.
+        """
         self.odom.clear()
         self.odom.append(pose)
+        self.misfit.clear()
         if self.anchor is not None:
             self.anchor = pose
 
