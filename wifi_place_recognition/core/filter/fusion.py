@@ -31,14 +31,13 @@ odometry.
 """
 
 from collections import Counter, deque
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import math
 
 import numpy as np
 
 from .angles import wrap
 from .particles import ParticleFilter
-from .sensor import WifiPosition
 from .track_misfit import TrackMisfit
 
 #: Why odometry or a scan was not applied (counted in ``Fusion.counts``).
@@ -102,14 +101,18 @@ class Fusion:
     """
     The filter fed by stamped odometry and scans, in stamp order.
 
+    ``sensor``: the filter's sensor model (default: a
+    :class:`.sensor.WifiSensorModel` of ``params``); it builds each scan's
+    measurement from its answer (position, sigma, misfit).
+
     :meth:`odometry` and :meth:`scan` return the fused poses of the scans
     they let through (a scan may wait for odometry); :meth:`expire` lets
     scans through alone once odometry is late; :meth:`pose` is the pose at
     the newest odometry, between scans.
     """
 
-    def __init__(self, params=None, limits=None, seed=0):
-        self.filter = ParticleFilter(params, seed)
+    def __init__(self, params=None, limits=None, seed=0, sensor=None):
+        self.filter = ParticleFilter(params, seed, sensor)
         self.misfit = TrackMisfit(self.filter.params.track_s)
         self.limits = limits or FusionLimits()
         self.counts = Counter()
@@ -292,12 +295,13 @@ class Fusion:
         if not odometry or restart:     # the scans' track starts again
             self.misfit.clear()
         if place is not None:
-            misfit = self.misfit.add(stamp, xy, self.anchor[1:3]) \
-                if odometry else None
-            scan = WifiPosition(xy, sigma, misfit)
+            # a late scan's own odometry pose, not the particles' anchor
+            misfit = self.misfit.add(
+                stamp, xy, self._odometry_at(stamp)[1:3]) if odometry \
+                else None
             sensor = self.filter.sensor
-            self.counts['scans_off_track'] += \
-                sensor.width(scan) > sensor.width(replace(scan, misfit=None))
+            scan = sensor.measurement(xy, sigma, misfit)
+            self.counts['scans_off_track'] += sensor.off_track(scan)
             if self.filter.update(scan):
                 restart = True
                 self.misfit.clear()

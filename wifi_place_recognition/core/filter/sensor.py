@@ -4,8 +4,8 @@ The filter's sensor model: a WiFi scan's position, as far as it is trusted.
 :class:`WifiPosition` is the measurement (the scan's k-NN position, its
 sigma, its misfit to odometry); :class:`WifiSensorModel` weighs particles
 by it. Another model (e.g. a per-AP radio map) brings its own measurement
-type and the same four methods: ``width``, ``centre``, ``disagrees``,
-``likelihood``.
+type and the same methods: ``measurement`` (from a scan's answer),
+``off_track``, ``centre``, ``disagrees``, ``likelihood``.
 """
 
 from dataclasses import dataclass, replace
@@ -50,6 +50,14 @@ class WifiSensorModel:
         if scan.misfit is not None:
             width = max(width, p.track_scale * scan.misfit)
         return width
+
+    def measurement(self, xy, sigma, misfit):
+        """Return the :class:`WifiPosition` of a scan's answer."""
+        return WifiPosition(xy, sigma, misfit)
+
+    def off_track(self, scan):
+        """Return True when the scan's misfit widened it."""
+        return self.width(scan) > self.width(replace(scan, misfit=None))
 
     def centre(self, scan):
         """Return where a start from ``scan`` spreads its particles."""
