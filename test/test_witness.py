@@ -30,8 +30,12 @@ def truth(k):
 
 
 def drive(witness, steps, local=truth, fused_sd=0.5, yaw_sd=math.radians(3),
-          frame='map', local_frame='map', start=0):
-    """Feed ``steps`` seconds; return the judgements."""
+          frame='map', local_frame='map', start=0, send_seeds=True):
+    """
+    Feed ``steps`` seconds; return the judgements.
+
+    ``send_seeds``: every seed proposed is sent (``initial_pose_on_lost``).
+    """
     out = []
     for k in range(start, start + steps):
         if local is not None:
@@ -41,6 +45,8 @@ def drive(witness, steps, local=truth, fused_sd=0.5, yaw_sd=math.radians(3),
         xy, yaw = truth(k)
         j = witness.fused(k, frame, xy, yaw, cov(fused_sd, yaw_sd))
         if j is not None:
+            if j.seed and send_seeds:
+                witness.seeded(j.stamp)
             out.append(j)
     return out
 
@@ -163,6 +169,38 @@ def test_seeds_at_start_up_once_sure_and_when_lost_once_per_holdoff():
     judged = drive(w, 30, start=30)
     found = next(j.stamp for j in judged if j.ok) - 30
     assert found == math.ceil(p.alarm / p.agree_sigmas) - 1, found
+
+
+def test_a_seed_not_sent_leaves_a_lost_localiser_lost():
+    # initial_pose_on_lost off: the seeds proposed are not sent, so
+    # nothing starts the localiser over and the verdict stays lost
+    w = Witness()
+    drive(w, 10, send_seeds=False)
+    judged = drive(w, 120, local=lambda k: (truth(k)[0] + [20, 0], 0.0),
+                   start=10, send_seeds=False)
+    lost = next(i for i, j in enumerate(judged) if j.ok is False)
+    assert all(j.ok is False for j in judged[lost:]), \
+        [j.stamp for j in judged[lost:] if j.ok]
+    assert any(j.seed for j in judged[lost:])     # proposed, not sent
+    assert all(j.evidence == w.params.alarm for j in judged[lost:]), \
+        [j.evidence for j in judged[lost:]]
+
+
+def test_a_localiser_heard_is_not_seeded_as_absent():
+    # its poses refused (a zero covariance): it is there, not missing
+    w = Witness()
+    for k in range(60):
+        assert w.localiser(k, 'map', truth(k)[0], 0.0, np.zeros((3, 3)))
+        judgement = w.fused(k, 'map', *truth(k), cov())
+        assert judgement is None or not judgement.seed, judgement.seed
+    # a clock restarted: far back is a new timeline, near back refused
+    w = Witness()
+    drive(w, 30)
+    assert w.localiser(28.5, 'map', truth(28)[0], 0.0, cov(0.1)) is not None
+    for _ in range(3):      # a stale message resent stays refused
+        assert w.localiser(2.0, 'map', truth(2)[0], 0.0, cov(0.1))
+    assert w.localiser(3.0, 'map', truth(3)[0], 0.0, cov(0.1)) is None
+    assert w.local.stamp == 3.0     # the clock runs on from its restart
 
 
 def test_bad_poses_are_refused_with_a_reason():

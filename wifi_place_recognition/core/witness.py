@@ -40,12 +40,14 @@ localiser's last stamp.
 
 A pose to seed the localiser with (:attr:`Judgement.seed`) is the fused
 pose when it is sure (position standard deviation at most ``sure_sd``,
-yaw's at most ``sure_yaw_sd``): at start-up, while no localiser pose has
-been seen, and when the localiser is lost, at most once per ``holdoff``
-seconds. A seed sent clears the evidence: the localiser starts over.
+yaw's at most ``sure_yaw_sd``): at start-up, while no localiser message
+has been heard, and when the localiser is lost. The caller says when it
+sent one (:meth:`Witness.seeded`): the evidence is cleared (the localiser
+starts over) and no other is proposed for ``holdoff`` seconds.
 
 Bad localiser poses (:func:`pose_problem`: not finite, covariance not
-positive definite, stamps going backwards) are refused with a reason;
+positive definite, stamps going backwards, unless far enough back to be
+a restarted clock) are refused with a reason;
 the caller counts them. Nothing here raises on input.
 """
 
@@ -58,6 +60,9 @@ import numpy as np
 from .filter.angles import wrap
 from .filter.particles import UNKNOWN_VARIANCE
 
+#: A localiser stamp this many seconds before the previous one: a new
+#: timeline (a clock restarted), not a message out of order.
+NEW_TIMELINE_S = 10.0
 #: Fused poses kept for the distance moved since a localiser stamp.
 HISTORY = 4000
 #: Recent scans whose median sigma says whether the robot is surveyed.
@@ -188,6 +193,8 @@ class Witness:
         self.params = params or WitnessParams()
         self.survey = survey
         self.local = None        # newest localiser Pose
+        self.heard = False       # any localiser message, even refused
+        self._behind = None      # the last stamp refused as before
         self.history = deque(maxlen=HISTORY)  # fused (stamp, x, y)
         self.sigmas = deque(maxlen=COVERAGE_SCANS)   # recent scans' sigma
         self.evidence = {'fused': 0.0, 'scans': 0.0}
@@ -198,14 +205,29 @@ class Witness:
         self.last = None         # the last Judgement
 
     def localiser(self, stamp, frame, xy, yaw, cov):
-        """Take one localiser pose; return why it was refused, or None."""
+        """
+        Take one localiser pose; return why it was refused, or None.
+
+        A stamp before the previous one is refused, unless it follows
+        another refused one and both lie more than :data:`NEW_TIMELINE_S`
+        before it: a clock restarted (a bag or a simulation started
+        again), taken, the evidence cleared. A stale message resent stays
+        refused.
+        """
+        self.heard = True
         problem = pose_problem(stamp, xy, yaw, cov)
         if problem is None and self.local is not None and \
                 stamp < self.local.stamp:
-            problem = (f'stamp {stamp:.3f} s is before the previous one '
-                       f'({self.local.stamp:.3f} s)')
+            behind, self._behind = self._behind, stamp
+            if not (behind is not None and behind < stamp <
+                    self.local.stamp - NEW_TIMELINE_S):
+                return (f'stamp {stamp:.3f} s is before the previous one '
+                        f'({self.local.stamp:.3f} s)')
+            for witness in self.evidence:
+                self.evidence[witness], self.since[witness] = 0.0, None
         if problem is not None:
             return problem
+        self._behind = None
         self.local = Pose(float(stamp), frame, np.asarray(xy, np.float64),
                           float(yaw), np.asarray(cov, np.float64))
         if self.ok is None:
@@ -266,16 +288,25 @@ class Witness:
         sure = pose.sd <= p.sure_sd and pose.yaw_sd <= p.sure_yaw_sd
         if not sure or pose.stamp - self.last_seed < p.holdoff:
             return ''
-        if self.local is None:
+        if not self.heard:
             why = 'start-up: no localiser pose yet'
         elif judgement.ok is False:
             why = f'lost: {judgement.reason}'
         else:
             return ''
-        self.last_seed = pose.stamp
+        return why
+
+    def seeded(self, stamp):
+        """
+        Say that a proposed seed was sent at ``stamp``: the localiser starts over.
+
+        The evidence is cleared, and no other seed is proposed for
+        ``holdoff`` seconds. A seed not sent changes nothing: a lost
+        localiser stays lost.
+        """
+        self.last_seed = float(stamp)
         for witness in self.evidence:
             self.evidence[witness], self.since[witness] = 0.0, None
-        return why
 
     def _moved_since(self, stamp):
         """Return how far the fused pose moved since ``stamp`` (m)."""
@@ -438,5 +469,7 @@ def judge_offline(localiser, fused, params=None, frame='map', scans=None,
                                   fused[3][i]) if kind == 2 else \
             witness.scan(stamp, frame, scans[1][i], scans[2][i])
         if judgement is not None:
+            if judgement.seed:
+                witness.seeded(stamp)   # offline, every seed is sent
             out.append(judgement)
     return out

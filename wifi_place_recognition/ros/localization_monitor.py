@@ -184,6 +184,7 @@ class LocalizationMonitor(Node):
             return
         if judgement.seed and self.reseed:
             self._send_seed(msg, judgement.seed)
+            self.witness.seeded(judgement.stamp)
         self._publish_verdict(judgement.reason)
 
     def _on_place(self, msg):
