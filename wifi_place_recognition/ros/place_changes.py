@@ -16,6 +16,7 @@ answer whose position jumped (:func:`.step_sigmas`).
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from ..core.place_switch import PlaceSwitch
 from ..core.recognizer import step_sigmas
 from .messages import key_value
 
@@ -30,7 +31,7 @@ class PlaceChanges:
     def __init__(self, node, jump_threshold):
         self.jump_threshold = jump_threshold
         self.place = None             # (building, floor), last confident
-        self._candidate = None        # another place, confident once
+        self._switch = PlaceSwitch()  # a new place at its second answer
         self._last_position = None    # ((building, floor), xy, cov)
         self._name = f'{node.get_name()}: current place'
         self._logger = node.get_logger()
@@ -57,12 +58,9 @@ class PlaceChanges:
                 if jumps and sigmas > self.jump_threshold:
                     reasons.append(f'position jumped {sigmas:.1f} sigma')
             self._last_position = (key, place.position, place.position_cov)
-        if not confident:
+        switch = self._switch.switches(self.place, key, confident)
+        if not confident or (self.place not in (None, key) and not switch):
             return []
-        if self.place not in (None, key) and key != self._candidate:
-            self._candidate = key
-            return []
-        self._candidate = None
         if key != self.place:
             if self.place is not None:
                 reasons.insert(0, 'building {}, floor {} before'.format(

@@ -36,6 +36,7 @@ import math
 
 import numpy as np
 
+from ..place_switch import PlaceSwitch
 from .angles import wrap
 from .particles import ParticleFilter
 from .track_misfit import TrackMisfit
@@ -113,6 +114,7 @@ class Fusion:
 
     def __init__(self, params=None, limits=None, seed=0, sensor=None):
         self.filter = ParticleFilter(params, seed, sensor)
+        self.switch = PlaceSwitch()
         self.misfit = TrackMisfit(self.filter.params.track_s)
         self.limits = limits or FusionLimits()
         self.counts = Counter()
@@ -125,7 +127,7 @@ class Fusion:
         #                         arrival, sigma), in stamp order
         self.anchor = None      # the odometry pose the particles are at
         self.place = None
-        self._candidate = None  # a confident scan's other place, once
+        self.switch.reset()     # to another place: PlaceSwitch's rule
         self.last_scan = None   # stamp of the last scan applied
         self.filter.state = None
         self.misfit.clear()     # the recent scans' track
@@ -201,8 +203,8 @@ class Fusion:
         moved = place != self.place and self.place is not None
         if moved:
             self.counts['scans_other_place'] += 1
-        apply = not moved or (confident and self._candidate == place)
-        self._candidate = place if moved and confident else None
+        apply = self.switch.switches(self.place, place, confident) or \
+            not moved
         self.pending.append((float(stamp), xy, place if apply else None,
                              float(stamp if arrival is None else arrival),
                              sigma))
