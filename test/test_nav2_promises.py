@@ -11,13 +11,11 @@ so.
 """
 
 from conftest import dataset_file, wait_until
-from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseWithCovarianceStamped
 import numpy as np
 import pytest
-from ros_helpers import RELIABLE, running_node
+from ros_helpers import running_node
 from test_fusion_node import Drive, health
-from test_place_changes import Building, LATCHED
+from test_place_changes import Building, listen
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.core.resources import default_model_path
@@ -62,15 +60,7 @@ def test_a_single_wrong_scan_does_not_switch_maps(
                       '-p', 'initial_pose_on_change:=true', '-p',
                       f'frame_id:={FRAME}', '-p', 'jump_threshold:=100.0'
                       ) as (client, proc, _):   # the scans' jumps: not here
-        places, initial = [], []
-        subs = [ros.create_subscription(
-                    DiagnosticArray, f'/{name}/current_place',
-                    places.append, LATCHED),
-                ros.create_subscription(
-                    PoseWithCovarianceStamped, '/initialpose',
-                    initial.append, RELIABLE)]
-        assert wait_until(lambda: all(s.get_publisher_count() for s in subs),
-                          30, ros)
+        places, initial, subs = listen(ros, name)
 
         def step(floor):
             client.seq += 4     # 5 s after the last scan

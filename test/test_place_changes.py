@@ -44,6 +44,23 @@ class Building:
         return [mac(i) for i in seen], np.round(rssi[seen]).tolist()
 
 
+def listen(ros, name):
+    """
+    Return (current places, initialposes, subscriptions) of node ``name``.
+
+    Once both topics are matched; keep the subscriptions while listening.
+    """
+    places, initial = [], []
+    subs = [ros.create_subscription(DiagnosticArray,
+                                    f'/{name}/current_place', places.append,
+                                    LATCHED),
+            ros.create_subscription(PoseWithCovarianceStamped,
+                                    '/initialpose', initial.append, RELIABLE)]
+    assert wait_until(lambda: all(s.get_publisher_count() for s in subs), 30,
+                      ros)
+    return places, initial, subs
+
+
 #: A walk on floor 0, the lift to floor 1, a walk there, then carried to
 #: the far corner: (x, y, floor), one scan every 5 s.
 WALK = ([(10 + i, 10, 0) for i in range(8)] +
@@ -58,15 +75,7 @@ def test_a_walk_that_changes_floor_reseeds_nav2_and_latches_the_place(
     with running_node(ros, tmp_path, surveyed_model, 'nav_node', '-p',
                       'tracking:=true', '-p', 'initial_pose_on_change:=true',
                       '-p', f'frame_id:={FRAME}') as (client, proc, _):
-        places, initial = [], []
-        subs = [ros.create_subscription(
-                    DiagnosticArray, '/nav_node/current_place',
-                    places.append, LATCHED),
-                ros.create_subscription(
-                    PoseWithCovarianceStamped, '/initialpose',
-                    initial.append, RELIABLE)]
-        assert wait_until(lambda: all(s.get_publisher_count() for s in subs),
-                          30, ros)
+        places, initial, subs = listen(ros, 'nav_node')
         answers = []
         for i, (x, y, floor) in enumerate(WALK):
             client.seq += 700 if i == 0 else 4      # a new walk, then 5 s

@@ -273,11 +273,12 @@ class Fusion:
         restart = place is not None and (not self.filter.started or
                                          place != self.place)
         if odometry:
-            if self.anchor is not None and stamp < self.anchor[0]:
-                self.counts['scans_late'] += 1
-            pose = self._odometry_at(max(stamp, self.anchor[0])
-                                     if self.anchor and not restart
-                                     else stamp)
+            at = self._odometry_at(stamp)   # the scan's own odometry pose
+            late = self.anchor is not None and stamp < self.anchor[0]
+            self.counts['scans_late'] += late
+            # a late scan does not move the particles back
+            pose = self._odometry_at(self.anchor[0]) if late and \
+                not restart else at
             if restart or self.anchor is None:
                 self.anchor = pose
             else:
@@ -297,9 +298,7 @@ class Fusion:
         if not odometry or restart:     # the scans' track starts again
             self.misfit.clear()
         if place is not None:
-            # a late scan's own odometry pose, not the particles' anchor
-            misfit = self.misfit.add(
-                stamp, xy, self._odometry_at(stamp)[1:3]) if odometry \
+            misfit = self.misfit.add(stamp, xy, at[1:3]) if odometry \
                 else None
             sensor = self.filter.sensor
             scan = sensor.measurement(xy, sigma, misfit)
