@@ -64,7 +64,8 @@ from wifi_place_recognition.core.filter.fusion import (compose, Fusion,
                                                        relative)
 from wifi_place_recognition.core.filter.trajectory import (fuse_offline,
                                                            truth_at)
-from wifi_place_recognition.core.witness import judge_offline, WitnessParams
+from wifi_place_recognition.core.witness_offline import judge_offline
+from wifi_place_recognition.core.witness_params import WitnessParams
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.poses import read_poses
 

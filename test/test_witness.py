@@ -13,8 +13,10 @@ import math
 import numpy as np
 import pytest
 from wifi_place_recognition.core.filter.particles import UNKNOWN_VARIANCE
-from wifi_place_recognition.core.witness import (judge_offline, pose_problem,
-                                                 Witness, WitnessParams)
+from wifi_place_recognition.core.witness import Witness
+from wifi_place_recognition.core.witness_inputs import pose_problem
+from wifi_place_recognition.core.witness_offline import judge_offline
+from wifi_place_recognition.core.witness_params import WitnessParams
 
 SPEED = 0.5
 

@@ -7,7 +7,7 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from std_msgs.msg import Bool
 
-from ..core.witness import WitnessParams
+from ..core.witness_params import WitnessParams
 from . import node_interface
 from .node_interface import float_range
 

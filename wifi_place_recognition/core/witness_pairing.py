@@ -1,0 +1,86 @@
+"""
+The witness's streams paired in time (ROS-free).
+
+:class:`Streams` keeps the localiser's newest pose (one stamped before it
+is refused, unless the clock restarted), the fused poses' recent track
+(how far the robot moved since a localiser stamp: AMCL publishes only
+after it moved) and when each witness is next due to judge (about once
+per ``period`` of stamps).
+"""
+
+from collections import deque
+import math
+
+import numpy as np
+
+from .witness_inputs import Pose, pose_problem
+
+#: A localiser stamp this many seconds before the previous one: a new
+#: timeline (a clock restarted), not a message out of order.
+NEW_TIMELINE_S = 10.0
+#: Fused poses kept for the distance moved since a localiser stamp.
+HISTORY = 4000
+#: A fused pose this share of ``period`` after the last judgement is
+#: judged (scans a period apart have stamps a little closer, at times).
+SLACK = 0.9
+
+
+class Streams:
+    """The localiser's newest pose, the fused track, the judgements due."""
+
+    def __init__(self):
+        self.local = None        # newest localiser Pose
+        self.heard = False       # any localiser message, even refused
+        self._behind = None      # the last stamp refused as before
+        self.history = deque(maxlen=HISTORY)  # fused (stamp, x, y)
+        self.judged = {'fused': -math.inf, 'scans': -math.inf}
+
+    def localiser(self, stamp, frame, xy, yaw, cov):
+        """
+        Take one localiser pose; return (why refused or None, restarted).
+
+        A stamp before the previous one is refused, unless it follows
+        another refused one and both lie more than :data:`NEW_TIMELINE_S`
+        before it: a clock restarted (a bag or a simulation started
+        again), taken with ``restarted`` True. A stale message resent
+        stays refused.
+        """
+        self.heard = True
+        problem = pose_problem(stamp, xy, yaw, cov)
+        if problem is not None:
+            return problem, False
+        restarted = self.local is not None and stamp < self.local.stamp
+        if restarted:
+            behind, self._behind = self._behind, stamp
+            if not (behind is not None and behind < stamp <
+                    self.local.stamp - NEW_TIMELINE_S):
+                return (f'stamp {stamp:.3f} s is before the previous one '
+                        f'({self.local.stamp:.3f} s)'), False
+        self._behind = None
+        self.local = Pose.of(stamp, frame, xy, yaw, cov)
+        return None, restarted
+
+    def fused(self, pose, period):
+        """Add a fused Pose to the track; return True if a judgement is due."""
+        if self.history and pose.stamp < self.history[-1][0]:
+            self.history.clear()        # a new timeline
+            self.judged['fused'] = -math.inf
+        self.history.append((pose.stamp, *pose.xy))
+        return self.due('fused', pose.stamp, period)
+
+    def due(self, witness, stamp, period):
+        """Return True if ``witness`` judges at ``stamp`` (``period`` s on)."""
+        if stamp < self.judged[witness]:
+            self.judged[witness] = -math.inf      # a new timeline
+        if stamp - self.judged[witness] < SLACK * period:
+            return False
+        self.judged[witness] = stamp
+        return True
+
+    def moved_since(self, stamp):
+        """Return how far the fused pose moved since ``stamp`` (m)."""
+        if not self.history:
+            return 0.0
+        stamps = np.array([h[0] for h in self.history])
+        i = int(np.clip(np.searchsorted(stamps, stamp), 0, len(stamps) - 1))
+        return float(math.dist(self.history[i][1:], self.history[-1][1:]))

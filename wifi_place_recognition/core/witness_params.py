@@ -1,0 +1,49 @@
+"""How the localiser's witness judges: its parameters, checked (ROS-free)."""
+
+from dataclasses import dataclass, fields
+import math
+
+
+@dataclass(frozen=True)
+class WitnessParams:
+    """
+    How the witness judges (seconds, m, rad, standard deviations).
+
+    The defaults of the thresholds the benchmark chooses (agree_sigmas,
+    alarm, floor_sd, max_scan_sigma, yaw_floor_sd, sure_sd, sure_yaw_sd)
+    are those it chose on the robot runs of building b24, which gave no
+    false alarm on b14's (``benchmarks/witness.py``).
+    """
+
+    period: float = 1.0            # s between judgements (fused stamps)
+    floor_sd: float = 0.5          # m added on each axis to both covariances
+    yaw_floor_sd: float = math.radians(5.0)    # rad, the same for the yaw
+    yaw_known_sd: float = math.radians(30.0)   # rad: wider fused yaw unknown
+    max_fused_sd: float = 5.0      # m: a wider fused pose is no evidence
+    scan_floor_sd: float = 2.0     # m added on each axis for a scan
+    coverage_m: float = 2.0        # m: scans testify within this of the survey
+    max_scan_sigma: float = 3.0    # m: recent scans wider: the robot is off
+    #                                the survey, the fused pose no evidence
+    agree_sigmas: float = 3.0      # a judgement this far apart is neutral
+    max_step: float = 10.0         # most evidence one judgement adds
+    alarm: float = 60.0            # evidence at which the localiser is lost
+    max_age: float = 10.0          # s: an older pose is silent, an older
+    #                                comparison no longer says "agrees"
+    silent_m: float = 5.0          # m moved with a silent localiser: lost
+    sure_sd: float = 2.0           # m: a fused pose this sure may seed
+    sure_yaw_sd: float = math.radians(15.0)    # rad, the same for its yaw
+    holdoff: float = 30.0          # s between two seeds
+
+    def __post_init__(self):
+        """Refuse non-finite or non-positive values, naming the field."""
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or \
+                    not isinstance(value, (int, float)) or \
+                    not math.isfinite(value) or value <= 0:
+                raise ValueError(f'witness parameter {f.name} = {value!r}: '
+                                 f'expected a finite number > 0')
+        if self.max_step >= self.alarm:
+            raise ValueError(f'witness parameter max_step = {self.max_step!r}'
+                             f' must be below alarm = {self.alarm!r} (one '
+                             f'judgement must never alarm)')

@@ -1,0 +1,77 @@
+"""
+What each witness testifies, and how far apart it says the localiser is.
+
+A scan testifies when :func:`scan_doubt` has nothing against it (its
+sigma up to ``max_scan_sigma``: a scan unlike every surveyed one, the
+k-NN's sigma grows with that, snaps to the nearest surveyed place) and
+the survey covers the localiser's position (:func:`covered`). The
+distances are Mahalanobis distances under the sum of both covariances,
+plus floors for what neither knows and the distance the robot moved since
+the localiser's stamp (ROS-free).
+"""
+
+import math
+
+import numpy as np
+
+from .filter.angles import wrap
+from .filter.particles import UNKNOWN_VARIANCE
+
+
+def scan_doubt(sigma, params):
+    """
+    Return why a scan with this sigma (m) does not testify, or ''.
+
+    The one rule for which scans testify (a scan's own, whatever the
+    localiser's pose): a scan too unlike every surveyed one.
+    """
+    if sigma > params.max_scan_sigma:
+        return f'scan off the survey (sigma {sigma:.1f} m)'
+    return ''
+
+
+def covered(survey, frame, xy, coverage_m):
+    """
+    Return True if a reference of ``survey`` lies within ``coverage_m`` of xy.
+
+    ``survey``: {frame: (n, 2) positions}; None: every place is covered,
+    a frame not in it: none.
+    """
+    if survey is None:
+        return True
+    refs = survey.get(frame)
+    if refs is None or not len(refs):
+        return False
+    return float(np.min(np.sum((refs - xy) ** 2, axis=1))) <= coverage_m ** 2
+
+
+def mahalanobis(delta, cov):
+    """Return (squared Mahalanobis distance, Euclidean distance)."""
+    return (float(delta @ np.linalg.solve(cov, delta)),
+            float(np.linalg.norm(delta)))
+
+
+def fused_distance(local, pose, moved, params):
+    """
+    Return (d2, metres, yaw degrees) between the localiser and a fused Pose.
+
+    The yaw joins only when the fused yaw is known (its deviation up to
+    ``yaw_known_sd``) and the localiser's is not unknown; else NaN.
+    """
+    p = params
+    extra = p.floor_sd ** 2 + moved ** 2
+    d2, distance = mahalanobis(local.xy - pose.xy, local.cov[:2, :2] +
+                               pose.cov[:2, :2] + extra * np.eye(2))
+    yaw_deg = math.nan
+    if pose.yaw_sd <= p.yaw_known_sd and local.cov[2, 2] < UNKNOWN_VARIANCE:
+        turn = float(wrap(local.yaw - pose.yaw))
+        d2 += turn ** 2 / (local.cov[2, 2] + pose.cov[2, 2] +
+                           p.yaw_floor_sd ** 2)
+        yaw_deg = math.degrees(turn)
+    return d2, distance, yaw_deg
+
+
+def scan_distance(local, xy, sigma, moved, params):
+    """Return (d2, metres) between the localiser and a scan's own position."""
+    extra = sigma ** 2 + params.scan_floor_sd ** 2 + moved ** 2
+    return mahalanobis(local.xy - xy, local.cov[:2, :2] + extra * np.eye(2))
