@@ -7,8 +7,9 @@ judges by stamps, so a minute of driving takes a second or two); the
 monitor runs in its own process (the shipped model's survey). The robot
 drives along x at 0.5 m/s; the fused pose is the truth with 0.5 m and 3
 degrees of spread (a kidnap: the scans' own positions on ``~/place``
-instead). Checked: the latched ``~/localization_ok``, the status
-on ``/diagnostics``, and ``initialpose``.
+instead). Checked: the latched ``~/status`` and ``~/localization_ok``,
+the status on ``/diagnostics``, ``initialpose``, the log, and parameters
+refused in the parameters' own terms.
 """
 
 import math
@@ -18,9 +19,9 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
 import numpy as np
 import pytest
-from ros_helpers import NodeProcess, RELIABLE
+from ros_helpers import Client, NodeProcess, RELIABLE
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Bool
+from std_msgs.msg import Bool, String
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.resources import default_model_path
 from wifi_place_recognition.ros.localization_monitor import survey_of
@@ -31,6 +32,12 @@ T0 = 5000.0
 SPEED = 0.5
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: The latched topics read with room for every change (a state may last
+#: only a few milliseconds).
+EVERY_CHANGE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+LEVELS = {DiagnosticStatus.OK: 'OK', DiagnosticStatus.WARN: 'WARN',
+          DiagnosticStatus.ERROR: 'ERROR'}
 
 
 def pose(t, x, y, yaw, frame='map', sd=0.1, yaw_sd=0.05):
@@ -64,6 +71,7 @@ class Monitor:
         self.proc = NodeProcess(tmp_path, python_module(
             'ros.localization_monitor', '--ros-args', *params), name)
         self.verdicts, self.initial, self.status = [], [], []
+        self.states, self.diagnostics = [], []   # (level, message, values)
         self.seen_local = False
         self.local = ros.create_publisher(PoseWithCovarianceStamped,
                                           'amcl_pose', RELIABLE)
@@ -73,6 +81,9 @@ class Monitor:
             ros.create_subscription(Bool, f'/{name}/localization_ok',
                                     lambda m: self.verdicts.append(m.data),
                                     LATCHED),
+            ros.create_subscription(String, f'/{name}/status',
+                                    lambda m: self.states.append(m.data),
+                                    EVERY_CHANGE),
             ros.create_subscription(PoseWithCovarianceStamped,
                                     '/initialpose', self.initial.append,
                                     RELIABLE),
@@ -84,8 +95,28 @@ class Monitor:
                           self.verdicts, 60, ros), self.proc.stop()[1]
 
     def _on_diag(self, msg):
-        self.status += [status_values(s) for s in msg.status
-                        if s.name == f'{self.name}: localization']
+        mine = [s for s in msg.status
+                if s.name == f'{self.name}: localization']
+        self.status += [status_values(s) for s in mine]
+        self.diagnostics += [(LEVELS[s.level], s.message, status_values(s))
+                             for s in mine]
+
+    def diagnosed_states(self):
+        """Return the states seen on /diagnostics, each repeat once."""
+        out = []
+        for _, _, values in self.diagnostics:
+            if out[-1:] != [values['state']]:
+                out.append(values['state'])
+        return out
+
+    def diagnosis(self, state):
+        """Return (level, message, values) of the first status in ``state``."""
+        return next(d for d in self.diagnostics if d[2]['state'] == state)
+
+    def wait_state(self, state):
+        """Wait until ``~/status`` says ``state``."""
+        assert wait_until(lambda: self.states[-1:] == [state], 10,
+                          self.ros), self.states
 
     def spin(self, seconds=0.03):
         wait_until(lambda: False, seconds, self.ros)
@@ -146,11 +177,14 @@ def test_a_localiser_that_agrees_is_never_judged_lost(monitor, ros):
     m.spin(0.5)
     assert m.verdicts[0] is False           # before the first pose
     assert m.verdicts[1:] == [True], m.verdicts
+    # the first pose has nothing to compare with, the next fused pose has
+    assert m.states == ['waiting', 'cannot_tell', 'agrees'], m.states
     assert not m.initial
     values = m.latest_status()
     assert values['localization_ok'] == 'true'
     assert float(values['agreement_sigma']) < 3, values
     assert float(values['score']) < 0.5, values
+    assert m.diagnostics[-1][:2] == ('OK', 'localiser agrees with WiFi')
 
 
 def test_a_displaced_localiser_is_lost_and_reseeded_near_the_truth(
@@ -181,6 +215,10 @@ def test_a_displaced_localiser_is_lost_and_reseeded_near_the_truth(
     assert float(values['distance_m']) > 10, values
     assert float(values['disagreeing_for_s']) > 0, values
     assert int(values['seeds_sent']) == 1
+    assert m.states[-1] == 'lost', m.states
+    level, message, _ = m.diagnosis('lost')
+    assert level == 'ERROR' and message.startswith('localiser lost: ') and \
+        'from the WiFi' in message, message
     # the localiser takes the seed: found again
     for k in range(50, 60):
         m.step(k, local=truth(k))
@@ -312,3 +350,82 @@ def test_bad_localiser_messages_are_counted_named_and_left_out(
     for text in ('x, y = nan', 'w = 0, 0, 0, 0', "frame 'odom'",
                  'before the previous one', 'not positive definite'):
         assert text in log or text.replace('w = ', '') in log, (text, log)
+
+
+def test_with_nothing_to_compare_wifi_cannot_tell_at_once(monitor, ros):
+    m = monitor('nothing_monitor')
+    m.send_local(pose(T0, *truth(0)))   # no fused pose, no scan yet
+    for k in range(1, 5):               # then fused poses that agree
+        m.step(k, local=truth(k))
+    m.wait_state('agrees')
+    assert m.states == ['waiting', 'cannot_tell', 'agrees'], m.states
+    # the Bool: true = not known to be lost, also when WiFi cannot tell
+    assert m.verdicts == [False, True], m.verdicts
+    # each state went out on /diagnostics when it began, not at the next
+    # once-a-second status (cannot_tell lasted a few milliseconds)
+    assert m.diagnosed_states()[-2:] == ['cannot_tell', 'agrees'], \
+        m.diagnosed_states()
+    level, message, values = m.diagnosis('cannot_tell')
+    assert (level, message) == ('WARN', 'WiFi cannot tell: no WiFi pose or '
+                                'scan yet')
+    assert values['localization_ok'] == 'true', values
+    log = m.close()
+    m.close = lambda: None
+    assert 'WiFi cannot tell: no WiFi pose or scan yet' in log, log
+    assert 'localiser agrees with WiFi' in log, log
+
+
+def test_a_wide_fused_pose_and_scans_off_the_survey_cannot_tell(
+        monitor, ros):
+    here = survey_of(load_model(default_model_path()), 'map')['map'][0]
+    m = monitor('wide_monitor')
+    answers = ros.create_publisher(DiagnosticArray, 'classifier_node/place',
+                                   RELIABLE)
+    assert wait_until(lambda: answers.get_subscription_count(), 30, ros)
+    for k in range(10):     # the filter 11 m wide, the scans unlike any
+        m.send_local(pose(T0 + k, *here, 0.0))
+        m.fused.publish(pose(T0 + k, *here, 0.0, sd=11.0, yaw_sd=0.05))
+        answers.publish(place_answer(T0 + k, here, 5.0))
+        m.spin()
+    m.wait_state('cannot_tell')
+    m.latest_status()               # the status after the last judgement
+    level, message, values = m.diagnostics[-1]
+    assert level == 'WARN' and message.startswith('WiFi cannot tell: ')
+    assert 'fused pose too wide (11.0 m)' in message or \
+        'scan off the survey (sigma 5.0 m)' in message, message
+    assert values['localization_ok'] == 'true'
+    for k in range(10, 15):     # a scan like the surveyed ones testifies
+        m.send_local(pose(T0 + k, *here, 0.0))
+        answers.publish(place_answer(T0 + k, here, 1.5))
+        m.spin()
+    m.wait_state('agrees')
+    ros.destroy_publisher(answers)
+    assert m.states == ['waiting', 'cannot_tell', 'agrees'], m.states
+    assert m.verdicts == [False, True], m.verdicts
+
+
+def test_parameters_are_refused_in_their_own_terms(monitor, ros):
+    m = monitor('param_monitor')
+    client = Client(ros, 'param_monitor')
+    try:
+        refused = [client.set_param('alarm', value).reason
+                   for value in (0, 0.0, 5.0)]
+        yaw = client.set_param('yaw_floor_deg', 0.0)
+        assert client.set_param('alarm', 20.0).successful
+    finally:
+        client.close()
+    # an integer for a double: rclpy refuses the type
+    assert refused[0].startswith('Wrong parameter type'), refused
+    assert refused[1] == 'alarm = 0.0: expected a number > 0'
+    # the rule named with what the user sets, not a field of the core
+    assert refused[2].startswith('alarm = 5.0 must be above 10: one '
+                                 'judgement adds at most 10'), refused
+    assert 'agree_sigmas' in refused[2] and 'max_step' not in refused[2]
+    assert not yaw.successful and \
+        yaw.reason == 'yaw_floor_deg = 0.0: expected a number > 0', yaw
+    log = m.close()
+    m.close = lambda: None
+    assert 'model ' in log and 'surveyed positions; judging /amcl_pose ' \
+        'against /classifier_node/pose and /classifier_node/place in frame ' \
+        'map: agree_sigmas 3, alarm 60, max_scan_sigma 3 m, ' \
+        'initial_pose_on_lost false' in log, log

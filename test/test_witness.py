@@ -5,7 +5,8 @@ Synthetic streams: the robot drives along x at 0.5 m/s, a fused pose and a
 localiser pose every second. Checked: agreement, one bad scan, a
 sustained disagreement, the yaw only when the fused yaw is known, another
 floor's frame, the survey's coverage, a silent localiser, seeds at
-start-up and when lost, bad input refused with a reason.
+start-up and when lost, bad input refused with a reason, and the state:
+agrees only when WiFi compared, cannot tell when nothing was.
 """
 
 import math
@@ -13,7 +14,8 @@ import math
 import numpy as np
 import pytest
 from wifi_place_recognition.core.filter.particles import UNKNOWN_VARIANCE
-from wifi_place_recognition.core.witness import Witness
+from wifi_place_recognition.core.witness import (AGREES, CANNOT_TELL, LOST,
+                                                 WAITING, Witness)
 from wifi_place_recognition.core.witness_inputs import pose_problem
 from wifi_place_recognition.core.witness_offline import judge_offline
 from wifi_place_recognition.core.witness_params import WitnessParams
@@ -242,3 +244,39 @@ def test_judge_offline_takes_the_streams_in_stamp_order():
     assert judged[0].reason == 'no localiser pose'
     assert judged[-1].ok is False
     assert judge_offline(None, fused)[0].seed.startswith('start-up')
+
+
+def test_the_state_says_agrees_only_when_wifi_compared():
+    p = WitnessParams()
+    w = Witness(p)
+    assert (w.state, w.why) == (WAITING, 'no localiser pose yet')
+    w.localiser(0, 'map', *truth(0), cov(0.1))
+    assert w.ok and (w.state, w.why) == (CANNOT_TELL,
+                                         'no WiFi pose or scan yet')
+    w.fused(0, 'map', *truth(0), cov(p.max_fused_sd + 1))   # a wide filter
+    assert w.ok and (w.state, w.why) == (CANNOT_TELL,
+                                         'fused pose too wide (6.0 m)')
+    drive(w, 5, start=1)
+    assert (w.state, w.why) == (AGREES, '')
+    # the WiFi stops, the localiser goes on: the comparison grows old
+    for k in range(6, 6 + int(p.max_age)):
+        w.localiser(k, 'map', *truth(k), cov(0.1))
+    assert w.state == AGREES
+    w.localiser(16, 'map', *truth(16), cov(0.1))
+    assert w.ok and (w.state, w.why) == (CANNOT_TELL,
+                                         'no WiFi pose or scan for 11 s')
+    # scans off the survey: nothing to compare, nor is the fused pose
+    for k in range(17, 20):
+        w.localiser(k, 'map', *truth(k), cov(0.1))
+        w.scan(k, 'map', truth(k)[0], p.max_scan_sigma + 1)
+    assert (w.state, w.why) == (CANNOT_TELL,
+                                'scan off the survey (sigma 4.0 m)')
+    w.fused(20, 'map', *truth(20), cov())
+    assert (w.state, w.why) == (CANNOT_TELL, 'off the survey (3 of the '
+                                'last 3 scans do not testify)')
+    # scans like the surveyed ones, a displaced localiser: lost, and why
+    for k in range(21, 40):
+        w.localiser(k, 'map', truth(k)[0] + [20, 0], 0.0, cov(0.1))
+        w.scan(k, 'map', truth(k)[0], 1.0)
+        w.fused(k, 'map', *truth(k), cov())
+    assert w.state == LOST and w.why.startswith('20.0 m ('), w.why

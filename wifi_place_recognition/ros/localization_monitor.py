@@ -5,9 +5,13 @@ Subscribes the localiser's pose (``localizer_topic``, e.g. AMCL's
 ``amcl_pose``), classifier_node's fused pose (``fused_topic``) and its
 answers (``place_topic``: each scan's own position and sigma), and feeds
 them to :class:`.core.witness.Witness`, which judges whether they agree
-(see there). Publishes the verdict on the latched ``~/localization_ok``
-(``std_msgs/Bool``, once per change; false until the localiser's first
-pose), a status on ``/diagnostics`` every second, and with
+(see there). Publishes its state on the latched ``~/status``
+(``std_msgs/String``: ``agrees``, ``cannot_tell``, ``lost``, or
+``waiting`` before the localiser's first pose) and the verdict on the
+latched ``~/localization_ok`` (``std_msgs/Bool``: true while the
+localiser is not known to be lost, agrees or cannot tell; false when lost
+or before its first pose), each once per change and logged; a status on
+``/diagnostics`` every second and at once on a change of state; and with
 ``initial_pose_on_lost`` the fused pose (as classifier_node published it:
 its frame, pose and covariance) on ``initialpose`` at start-up and when
 the localiser is lost.
@@ -30,11 +34,11 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, QoSProfile, ReliabilityPolicy)
-from std_msgs.msg import Bool
+from std_msgs.msg import Bool, String
 
 from ..core.artifact import load_model, ModelFileError
 from ..core.resources import default_model_path
-from ..core.witness import Witness
+from ..core.witness import AGREES, CANNOT_TELL, LOST, WAITING, Witness
 from .classifier_parameters import check_frame
 from .messages import key_value as _kv, pose_problem, seconds, yaw_of
 from .monitor_parameters import declare, WITNESS_FIELDS, witness_params
@@ -47,6 +51,11 @@ INPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 #: Why a localiser message was refused (counted under these keys).
 BAD_REASONS = ('not_finite', 'not_unit_quaternion', 'covariance',
                'unknown_frame', 'stamp_backwards')
+#: Each state's /diagnostics level and message (then ": why").
+STATES = {WAITING: (DiagnosticStatus.WARN, 'no localiser pose yet'),
+          AGREES: (DiagnosticStatus.OK, 'localiser agrees with WiFi'),
+          CANNOT_TELL: (DiagnosticStatus.WARN, 'WiFi cannot tell'),
+          LOST: (DiagnosticStatus.ERROR, 'localiser lost')}
 
 
 def frame_pattern(template):
@@ -96,25 +105,29 @@ class LocalizationMonitor(Node):
                               seeds_sent=0, bad_fused=0)
         self.last_fused = None       # the newest fused message
         self._logged = {}            # bad-input reason -> when logged
+        self.status_pub = self.create_publisher(String, '~/status', LATCHED)
         self.ok_pub = self.create_publisher(Bool, '~/localization_ok',
                                             LATCHED)
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
         self.initial_pub = self.create_publisher(
             PoseWithCovarianceStamped, 'initialpose', 1)
-        self.create_subscription(PoseWithCovarianceStamped,
-                                 values['localizer_topic'],
-                                 self._on_localizer, INPUT_QOS)
-        self.create_subscription(PoseWithCovarianceStamped,
-                                 values['fused_topic'], self._on_fused,
-                                 INPUT_QOS)
-        self.create_subscription(DiagnosticArray, values['place_topic'],
-                                 self._on_place, INPUT_QOS)
+        inputs = [
+            self.create_subscription(PoseWithCovarianceStamped,
+                                     values['localizer_topic'],
+                                     self._on_localizer, INPUT_QOS),
+            self.create_subscription(PoseWithCovarianceStamped,
+                                     values['fused_topic'], self._on_fused,
+                                     INPUT_QOS),
+            self.create_subscription(DiagnosticArray, values['place_topic'],
+                                     self._on_place, INPUT_QOS)]
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
-        self._published = None
-        self._publish_verdict()
+        self._published = None       # the Bool published last
+        self._state = None           # the state published last
+        self._update()
         self.create_timer(1.0, self._publish_status)
+        self._log_start(inputs)
 
     # parameters -----------------------------------------------------------
     def _validate(self, params):
@@ -136,6 +149,19 @@ class LocalizationMonitor(Node):
             self.frames = frame_pattern(self.frame_id)
             self.witness.survey = survey_of(self.model, self.frame_id)
         self.reseed = values.get('initial_pose_on_lost', self.reseed)
+
+    def _log_start(self, inputs):
+        survey = self.witness.survey
+        where = 'no positions: WiFi cannot tell' if survey is None else \
+            f'{sum(map(len, survey.values()))} surveyed positions'
+        p = self.witness.params
+        localizer, fused, place = (s.topic_name for s in inputs)
+        self.get_logger().info(
+            f'model {self.model_path}: {where}; judging {localizer} against '
+            f'{fused} and {place} in frame {self.frame_id}: agree_sigmas '
+            f'{p.agree_sigmas:g}, alarm {p.alarm:g}, max_scan_sigma '
+            f'{p.max_scan_sigma:g} m, initial_pose_on_lost '
+            f'{str(self.reseed).lower()}')
 
     # inputs ---------------------------------------------------------------
     def _on_localizer(self, msg):
@@ -167,7 +193,7 @@ class LocalizationMonitor(Node):
                     f'{problem}')
             return
         self.counts['localizer_poses'] += 1
-        self._publish_verdict()
+        self._update()
 
     def _on_fused(self, msg):
         pose = msg.pose.pose
@@ -185,7 +211,7 @@ class LocalizationMonitor(Node):
         if judgement.seed and self.reseed:
             self._send_seed(msg, judgement.seed)
             self.witness.seeded(judgement.stamp)
-        self._publish_verdict(judgement.reason)
+        self._update()
 
     def _on_place(self, msg):
         for status in msg.status:
@@ -201,7 +227,7 @@ class LocalizationMonitor(Node):
             self.counts['scans'] += 1
             if self.witness.scan(seconds(msg.header.stamp), frame, xy,
                                  sigma) is not None:
-                self._publish_verdict(self.witness.last.reason)
+                self._update()
 
     # outputs --------------------------------------------------------------
     def _send_seed(self, msg, why):
@@ -216,30 +242,40 @@ class LocalizationMonitor(Node):
             f'{msg.header.frame_id} (sd {math.sqrt(cov[0, 0]):.2f} m, '
             f'{math.degrees(math.sqrt(cov[2, 2])):.1f} deg)')
 
-    def _publish_verdict(self, reason=''):
+    def _message(self):
+        """Return the state's diagnostics level and message."""
+        level, message = STATES[self.witness.state]
+        why = self.witness.why
+        return level, message if why in ('', message) else f'{message}: {why}'
+
+    def _update(self):
+        """Publish the Bool and the state when they changed, at once."""
         ok = bool(self.witness.ok)
-        if ok == self._published:
+        if ok != self._published:
+            self._published = ok
+            self.ok_pub.publish(Bool(data=ok))
+        state = self.witness.state
+        if state == self._state:
             return
-        self._published = ok
-        self.ok_pub.publish(Bool(data=ok))
-        if self.witness.ok is False:
-            self.get_logger().warn(f'localiser lost: {reason}')
-        elif self.witness.ok:
-            self.get_logger().info('localiser agrees with WiFi')
+        first, self._state = self._state is None, state
+        self.status_pub.publish(String(data=state))
+        self._publish_status()
+        if first:
+            return
+        level, message = self._message()
+        if level == DiagnosticStatus.ERROR:     # one severity per call site
+            self.get_logger().warn(message)
+        else:
+            self.get_logger().info(message)
 
     def _publish_status(self):
         w = self.witness
         last = w.last
         now = last.stamp if last is not None else 0.0
-        if w.ok is None:
-            level, message = DiagnosticStatus.WARN, 'no localiser pose yet'
-        elif w.ok:
-            level, message = DiagnosticStatus.OK, 'localiser agrees with WiFi'
-        else:
-            level = DiagnosticStatus.ERROR
-            message = f'localiser lost: {last.reason if last else ""}'
+        level, message = self._message()
         local = w.local
         values = [
+            _kv('state', w.state),
             _kv('localization_ok', str(bool(w.ok)).lower()),
             _kv('agreement_sigma', f'{last.sigmas:.2f}' if last else 'nan'),
             _kv('distance_m', f'{last.distance_m:.2f}' if last else 'nan'),

@@ -1,11 +1,12 @@
 """localization_monitor's interface: its topics, and its parameters."""
 
+from dataclasses import replace
 import math
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rcl_interfaces.msg import ParameterDescriptor
-from std_msgs.msg import Bool
+from std_msgs.msg import Bool, String
 
 from ..core.witness_params import WitnessParams
 from . import node_interface
@@ -15,10 +16,12 @@ SUMMARY = """
 Watches the robot's localiser (e.g. AMCL) with WiFi as an independent
 witness: compares its pose with classifier_node's fused pose and scan
 positions, taking both sides' uncertainty and the survey's coverage into
-account, and says on the latched ~/localization_ok and on /diagnostics
-whether it agrees. With initial_pose_on_lost it re-seeds the localiser on
-initialpose with the fused pose: at start-up while the localiser has no
-pose, and when it is judged lost (also on another floor's map).
+account, and says on the latched ~/status, ~/localization_ok and on
+/diagnostics whether the localiser agrees with WiFi, WiFi cannot tell
+(nothing to compare) or the localiser is lost. With initial_pose_on_lost
+it re-seeds the localiser on initialpose with the fused pose: at start-up
+while the localiser has no pose, and when it is judged lost (also on
+another floor's map).
 """
 
 #: (role, name, type, what) of every topic the node uses.
@@ -31,13 +34,20 @@ TOPICS = (
     ('subscribes', '{place_topic}', DiagnosticArray,
      'classifier_node\'s answers (place_topic): each scan\'s own position '
      'and sigma'),
+    ('publishes', '~/status', String,
+     'the state: agrees (WiFi compared, the localiser is not lost), '
+     'cannot_tell (nothing to compare: no fused pose or scan yet, the '
+     'fused pose too wide, scans off the survey, the localiser silent), '
+     'lost, or waiting (no localiser pose yet); latched (transient local), '
+     'once per change'),
     ('publishes', '~/localization_ok', Bool,
-     'the verdict: true while the localiser agrees with WiFi, false when '
-     'lost or before its first pose; latched (transient local), once per '
-     'change'),
+     'the verdict: true while the localiser is not known to be lost '
+     '(agrees or cannot_tell), false when lost or before its first pose; '
+     'latched (transient local), once per change'),
     ('publishes', '/diagnostics', DiagnosticArray,
-     'the status every second: agreement (sigma), distance, for how long, '
-     'score, bad localiser messages'),
+     'the status every second and at once on a change of state (OK agrees, '
+     'WARN cannot tell or no localiser pose yet, ERROR lost): agreement '
+     '(sigma), distance, for how long, score, bad localiser messages'),
     ('publishes', 'initialpose', PoseWithCovarianceStamped,
      'with initial_pose_on_lost: the fused pose and its covariance, at '
      'start-up and when the localiser is lost'),
@@ -91,8 +101,10 @@ PARAMETERS = (
               'deviation) may seed the localiser', _D.sure_sd, 100.0),
     _positive('sure_yaw_deg', 'and its yaw this sure (degrees)',
               round(math.degrees(_D.sure_yaw_sd), 6), 180.0),
-    _positive('max_age', 'seconds after which the localiser\'s newest pose '
-              'is silent (not compared)', _D.max_age, 3600.0),
+    _positive('max_age', 'seconds after which a pose is old: the '
+              'localiser\'s newest is silent (not compared), and WiFi '
+              'cannot tell once its last comparison is this much older '
+              'than the newest stamp', _D.max_age, 3600.0),
     _positive('silent_m', 'metres the fused pose moves with the localiser '
               'silent before that counts as lost', _D.silent_m, 1000.0),
     _positive('holdoff', 'seconds between two seeds', _D.holdoff, 3600.0),
@@ -116,13 +128,23 @@ def witness_params(values, base=None):
     """
     Return WitnessParams from parameter ``values`` (others from ``base``).
 
-    Raises ValueError naming a refused value.
+    Raises ValueError naming a refused value and the rule it breaks, in
+    the parameters' terms (names, degrees).
     """
+    base = base or WitnessParams()
     changes = {}
     for name, value in values.items():
         if name in WITNESS_FIELDS:
+            if not value > 0:       # the ranges take 0
+                raise ValueError(f'{name} = {value!r}: expected a number > 0')
             field = WITNESS_FIELDS[name]
             changes[field] = math.radians(value) if name.endswith('_deg') \
                 else float(value)
-    base = base or WitnessParams()
-    return WitnessParams(**{**vars(base), **changes})
+    alarm = changes.get('alarm', base.alarm)
+    if alarm <= base.max_step:
+        raise ValueError(
+            f'alarm = {alarm!r} must be above {base.max_step:g}: one '
+            f'judgement adds at most {base.max_step:g} to the evidence (its '
+            f'sigmas beyond agree_sigmas, capped), and one judgement must '
+            f'never alarm')
+    return replace(base, **changes)
