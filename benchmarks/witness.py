@@ -30,9 +30,10 @@ protocol: ``benchmarks/fusion.py``'s survey_holes).
 - start-up: the localiser never publishes; the delay from the first scan
   to the first seed, and its error.
 
-The thresholds (agree_sigmas, alarm, floor_sd, max_scan_sigma,
-yaw_floor_sd; then sure_sd, sure_yaw_sd)
-are chosen on one building and reported on the other
+Every building's runs are scored with the node's defaults (any folder of
+runs, one building too). With two buildings or more, the thresholds
+(agree_sigmas, alarm, floor_sd, max_scan_sigma, yaw_floor_sd; then
+sure_sd, sure_yaw_sd) are also chosen on the others and reported on each
 (leave-one-building-out): on b14 for b24 and on b24 for b14, never on what
 is reported. Choice on the tuning building: the fewest false alarms (full
 and holes), then the fewest flagged inside AMCL's covariance, then the
@@ -469,12 +470,23 @@ def main():
           f'{"max s":>6s} {"miss":>7s} {"in":>5s} {"reseed":>6s} {"(n)":5s} '
           f'{"start":>6s} {"m":>5s} {"deg":>5s}')
     for site, tune in ((s, [t for t in cases if t != s]) for s in cases):
+        figures = {c.run.name: evaluate(c, WitnessParams())
+                   for c in cases[site]}
+        results['buildings'][site] = {'defaults': {
+            'params': vars(WitnessParams()),
+            'summary': summary(list(figures.values())), 'runs': figures}}
+        print(f'{site}: the node\'s defaults')
+        for name, f in figures.items():
+            print(row(name, f), flush=True)
+        if not tune:
+            print(f'{site}: no other building to choose the thresholds on')
+            continue
         params, tried = choose([c for t in tune for c in cases[t]])
         figures = {c.run.name: evaluate(c, params) for c in cases[site]}
-        results['buildings'][site] = {
+        results['buildings'][site].update({
             'chosen_on': tune, 'params': vars(params),
             'summary': summary(list(figures.values())), 'runs': figures,
-            'tried_on_tuning': tried}
+            'tried_on_tuning': tried})
         print(f'{site}: thresholds chosen on {", ".join(tune)}: ' + ', '.join(
             f'{k} {getattr(params, k):.3g}' for k in (*GRID, *SEED_GRID)))
         for name, f in figures.items():
