@@ -19,7 +19,7 @@ def _checkout():
     """Return the repository: above this file, or above the one run."""
     here = os.path.dirname(os.path.abspath(__file__))
     with open(__file__) as f:    # rosdoc2: exec(open("<doc>/conf.py")...)
-        wrapped = re.search(r'exec\(open\("(.+?)"\)', f.read())
+        wrapped = re.search(r'^exec\(open\("(.+?)"\)', f.read(), re.M)
     if wrapped:
         here = os.path.dirname(wrapped.group(1))
     return os.path.dirname(here)
@@ -40,6 +40,10 @@ autodoc_default_options = {'members': True, 'member-order': 'bysource'}
 autodoc_typehints = 'none'
 napoleon_google_docstring = False
 html_theme = 'alabaster'
+#: Table cells that wrap in either theme (rosdoc2 overrides the theme);
+#: absolute, since rosdoc2 runs this file from its own folder.
+html_static_path = [os.path.join(_checkout(), 'doc', '_static')]
+html_css_files = ['readable.css']
 
 #: rosdoc2's copy of README.md, two folders below the pages.
 README = 'standard_docs/original/README'

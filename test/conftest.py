@@ -6,8 +6,9 @@ test is marked with its tiers from what it uses (its code, its fixtures
 and the helpers they call), so new test files are sorted too:
 
 - ``ros``: ROS 2 (an rclpy node, a node process, messages);
-- ``dataset``: UJIIndoorLoc or WiFine (``dataset_file``, ``WIFINE``, the
-  datasets of the docs' examples, ``EXAMPLE_DATA``);
+- ``dataset``: UJIIndoorLoc or WiFine (``dataset_file``,
+  ``DEFAULT_DATASET``, ``WIFINE``, the datasets of the docs' examples,
+  ``EXAMPLE_DATA``);
 - ``system``: other processes (the executables, a venv, colcon);
 - ``stress``: a busy core, scan floods, signals at random moments;
 - ``linter``: flake8, pep257;
@@ -64,13 +65,19 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 TEST_DIR = Path(__file__).resolve().parent
 REPO = TEST_DIR.parent
 FIXTURES = TEST_DIR / 'fixtures'
-DATASET = os.environ.get('WIFI_PR_DATASET')
+#: Where the tests that need UJIIndoorLoc read it, however pytest is
+#: started: $WIFI_PR_DATASET, else the shared copy beside the repository
+#: if it is there (None: those tests are skipped).
+DEFAULT_DATASET = REPO.parent / 'shared' / 'datasets' / 'ujiindoorloc'
+DATASET = os.environ.get('WIFI_PR_DATASET') or (
+    str(DEFAULT_DATASET) if DEFAULT_DATASET.is_dir() else None)
 
 
 def dataset_file(name):
-    """Return a UJIIndoorLoc file from $WIFI_PR_DATASET, or skip the test."""
+    """Return a UJIIndoorLoc file from ``DATASET``, or skip the test."""
     if not DATASET or not (Path(DATASET) / name).exists():
-        pytest.skip('UJIIndoorLoc not available: set WIFI_PR_DATASET')
+        pytest.skip(f'UJIIndoorLoc not available: set WIFI_PR_DATASET '
+                    f'(default: {DEFAULT_DATASET})')
     return Path(DATASET) / name
 
 
@@ -234,7 +241,8 @@ ROS_PACKAGES = {e.text for tag in ('depend', 'exec_depend') for e in
                 if not e.text.startswith('python3-')} | {
     'rclpy', 'wifi_place_recognition.ros'}
 #: What marks a test ``dataset``, ``system``, ``stress`` when it reaches it.
-DATASET_NAMES = {'dataset_file', 'DATASET', 'WIFINE', 'EXAMPLE_DATA'}
+DATASET_NAMES = {'dataset_file', 'DATASET', 'DEFAULT_DATASET', 'WIFINE',
+                 'EXAMPLE_DATA'}
 SYSTEM_NAMES = {'run', 'python_module', 'subprocess'}
 STRESS_NAMES = {'busy_core', 'fuzz_scans', 'Harness'}
 

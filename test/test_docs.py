@@ -5,6 +5,9 @@ The documentation: the site builds, its examples run, its files exist.
   warnings as errors: a broken link or anchor, a missing page or picture,
   a docstring that no longer parses fails;
 - every module of ``core``, ``data`` and ``training`` has an API entry;
+- the pages fit the text column of both themes: no code line in a page
+  longer than the default theme shows without scrolling, and the style
+  that makes rosdoc2's table cells wrap is wired into ``conf.py``;
 - the shell examples the pages mark runnable (an HTML comment
   ``<!-- runnable -->`` on the line before a ``sh`` block: needs no
   hardware and no ``ros2`` CLI) are taken from README.md and doc/*.md and
@@ -15,6 +18,7 @@ The documentation: the site builds, its examples run, its files exist.
   draws from the committed JSON.
 """
 
+import json
 import os
 from pathlib import Path
 import re
@@ -30,6 +34,12 @@ MARKER = '<!-- runnable -->'
 #: The datasets the examples name, beside the repository as in CI.
 EXAMPLE_DATA = REPO.parent / 'shared' / 'datasets'
 BLOCK = re.compile(r'^```(\w*)\n(.*?)^```$', re.M | re.S)
+#: The longest code line the default theme (alabaster) shows in its text
+#: column without a scroll bar; rosdoc2's column holds more.
+CODE_WIDTH = 66
+#: The style both themes load (conf.py): table cells wrap, long code
+#: names in them break.
+STYLE = DOC / '_static' / 'readable.css'
 
 
 def examples():
@@ -72,12 +82,64 @@ def test_runnable_example_works_as_written(where, lang, script, tmp_path):
         f'\n{out.stderr[-3000:]}'
 
 
+def code_lines(page):
+    """Return [(line number, line)] inside the page's fenced code blocks."""
+    found, fence = [], None
+    for number, line in enumerate(page.read_text().splitlines(), 1):
+        if fence is None:
+            opening = re.match(r'(`{3,}|~{3,})(.*)', line)
+            if opening:    # a MyST directive ({toctree}) is no code
+                fence = opening.group(1)
+                code = not opening.group(2).strip().startswith('{')
+        elif line.strip().startswith(fence) and \
+                line.strip().strip(fence[0]) == '':
+            fence = None
+        elif code:
+            found.append((number, line))
+    return found
+
+
+def test_code_lines_fit_the_default_themes_column():
+    pages = [page for page in sorted(DOC.rglob('*.md'))
+             if page.name != 'nav2.md']    # nav2.md: wrapped by its owner
+    long = [f'{page.relative_to(REPO)}:{number}: {line}'
+            for page in pages for number, line in code_lines(page)
+            if len(line) > CODE_WIDTH]
+    assert not long, f'wrap under {CODE_WIDTH} characters (shell: a ' \
+        'backslash continuation):\n' + '\n'.join(long)
+
+
+def _conf(path):
+    """Return the settings conf.py gives when ``path`` is run."""
+    out = run([sys.executable, '-c', 'import json, runpy; s = runpy.run_path('
+               f'"{path}"); print(json.dumps([s.get("html_static_path"), '
+               's.get("html_css_files")]))'])
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+def test_both_themes_load_the_style_that_fits_the_column(tmp_path):
+    wrapper = tmp_path / 'wrapped_sphinx_directory' / 'conf.py'
+    wrapper.parent.mkdir()
+    wrapper.write_text(f'exec(open("{DOC / "conf.py"}").read())\n')
+    for conf in (DOC / 'conf.py', wrapper):    # Sphinx's, rosdoc2's
+        static, css = _conf(conf)
+        assert css == [STYLE.name] and static, conf
+        assert [Path(conf.parent, f) / STYLE.name for f in static] == \
+            [STYLE], conf
+    style = re.sub(r'\s+', ' ', STYLE.read_text())
+    # rosdoc2's theme keeps every cell on one line (white-space: nowrap)
+    assert '.wy-table-responsive table td, .wy-table-responsive table th' \
+        in style and 'white-space: normal' in style
+
+
 def test_site_builds_with_warnings_as_errors(tmp_path):
     out = run([sys.executable, '-m', 'sphinx', '-W', '--keep-going', '-q',
                '-b', 'html', '-d', str(tmp_path / 'doctrees'), str(DOC),
                str(tmp_path / 'html')], cwd=REPO)
     assert out.returncode == 0, out.stdout + out.stderr
     assert (tmp_path / 'html' / 'api' / 'core.html').exists()
+    assert _loads_the_style(tmp_path / 'html', 'design.html')
 
 
 def test_rosdoc2_builds_the_site_without_warnings(tmp_path):
@@ -95,6 +157,15 @@ def test_rosdoc2_builds_the_site_without_warnings(tmp_path):
     readme = (site / 'standard_docs' / 'original' / 'README.html').read_text()
     assert 'src="../../_images/confusion-ujiindoorloc.png"' in readme
     assert 'href="../../start-here.html"' in readme
+    assert _loads_the_style(site, 'design.html')
+    assert _loads_the_style(site, 'standard_docs/original/README.html')
+
+
+def _loads_the_style(site, page):
+    """Return True if a built page links the style and the site has it."""
+    depth = '../' * page.count('/')
+    return f'href="{depth}_static/{STYLE.name}' in (site / page).read_text() \
+        and (site / '_static' / STYLE.name).read_text() == STYLE.read_text()
 
 
 def test_conf_finds_the_checkout_when_rosdoc2_runs_it(tmp_path):
