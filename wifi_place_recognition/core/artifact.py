@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_write
+from .coverage import CoverageModel
 from .locator import LEVELS, Locator, METRICS
 from .model import ACTIVATIONS, Layer, PlaceModel
 from .preprocessing import RssiScaler, SIGNALS
@@ -72,6 +73,8 @@ def save_model(model, path):
         header['tracking'] = model.tracking.to_dict()
     if model.fusion is not None:
         header['fusion'] = model.fusion.to_dict()
+    if model.coverage is not None:
+        header['coverage'] = model.coverage.to_dict()
     if model.position is not None:
         pos = model.position
         if max(len(pos.xy), len(pos.ap_column)) >= MAX_INDEX:
@@ -216,11 +219,14 @@ def _build(header, arrays):
     if not members and position is None:
         raise ModelFileError('a one-class model without a network must have '
                              'a position output')
+    if position is None and 'coverage' in header:
+        raise ModelFileError('a coverage section needs a position output')
     return PlaceModel(ap_ids, scaler, members, classes,
                       header.get('provenance', {}),
                       _section(header, TrackingParams),
                       position, _temperature(header),
-                      _section(header, FusionParams))
+                      _section(header, FusionParams),
+                      _section(header, CoverageModel))
 
 
 def _temperature(header):

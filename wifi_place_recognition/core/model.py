@@ -4,8 +4,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .coverage import CoverageModel, features, unheard_share
 from .locator import Locator
-from .preprocessing import RssiScaler
+from .preprocessing import RssiScaler, signal
 from .filter.particles import FusionParams
 from .tracking import TrackingParams
 
@@ -87,6 +88,7 @@ class PlaceModel:
     position: Locator = None      # None: a classifier only
     temperature: float = 1.0      # of the probabilities (1: as computed)
     fusion: FusionParams = None   # odometry fusion, from the file, or None
+    coverage: CoverageModel = None  # P(a scan is covered), or None
     blank: np.ndarray = field(init=False, repr=False)
     first_t: np.ndarray = field(init=False, repr=False)
 
@@ -153,11 +155,12 @@ class PlaceModel:
         """
         return self.scaler.transform(rssi, columns) - self.blank[columns]
 
-    def predict_positions(self, rssi):
+    def predict_positions(self, rssi, coverage=False):
         """
         Return (class probabilities, xy metres (n, 2), sigma metres (n,)).
 
-        The batch form of what :class:`Locator` does for one scan.
+        The batch form of :meth:`locate`; with ``coverage``, each scan's
+        probability of being covered (n,) too.
 
         Raises ValueError for a model without a position output.
         """
@@ -167,11 +170,31 @@ class PlaceModel:
         proba = self.predict_proba(rssi)
         best = proba.argmax(axis=1)
         xy = np.empty((len(best), 2))
-        sigma = np.empty(len(best))
+        sigma, covered = np.empty(len(best)), np.full(len(best), np.nan)
         for i, (row, c) in enumerate(zip(np.asarray(rssi, np.float32), best)):
             columns = np.flatnonzero(~np.isnan(row))
-            xy[i], sigma[i] = self.position.locate(columns, row[columns], c)
-        return proba, xy, sigma
+            xy[i], sigma[i], p = self.locate(columns, row[columns], c)
+            covered[i] = np.nan if p is None else p
+        return (proba, xy, sigma) + ((covered,) if coverage else ())
+
+    def locate(self, columns, rssi, c, unknown=0):
+        """
+        Return (xy (2,), sigma m, P(covered) or None) of one scan of class c.
+
+        ``columns``/``rssi``: its APs known to the model and their readings
+        (dBm); ``unknown``: how many more it heard. The probability is
+        None without a coverage model.
+        """
+        locator = self.position
+        distance = locator.distances(
+            columns, signal(rssi, locator.representation), c)
+        xy, sigma = locator.weighted(distance, locator.neighbours, c)
+        if self.coverage is None:
+            return xy, sigma, None
+        x = features(locator, distance, c,
+                     unheard_share(locator, columns, c, unknown))
+        return xy, sigma, float(self.coverage.probability(x)) \
+            if np.isfinite(x).all() else None
 
     @property
     def class_names(self):

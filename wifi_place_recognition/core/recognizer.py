@@ -31,6 +31,7 @@ class Place:
     position_cov: np.ndarray = None  # (2, 2) m^2
     scan_position: np.ndarray = None  # (2,) this scan alone
     scan_sigma: float = float('nan')  # m, this scan alone
+    coverage: float = None      # P(this scan is where the survey covers)
 
     @property
     def position_sigma(self):
@@ -102,10 +103,11 @@ class PlaceRecognizer:
         best = int(proba.argmax())
         scan_building, scan_floor = (int(v) for v in self.model.classes[best])
         scan_confidence = float(proba[best])
-        xy = cov = None
+        xy = cov = coverage = None
         sigma = float('nan')
         if self.model.position is not None:
-            xy, sigma = self.model.position.locate(columns, scan.rssi, best)
+            xy, sigma, coverage = self.model.locate(columns, scan.rssi, best,
+                                                    scan.unknown)
             cov = np.eye(2) * sigma ** 2
         scan_xy = xy
         if self.tracker is None or time is None:
@@ -131,7 +133,7 @@ class PlaceRecognizer:
         return Place(building, floor, confidence, probabilities, scan.known,
                      scan.unknown, scan.clipped, level, message,
                      scan_building, scan_floor, scan_confidence, xy, cov,
-                     scan_xy, sigma)
+                     scan_xy, sigma, coverage)
 
 
 def step_sigmas(before_xy, before_cov, after_xy):

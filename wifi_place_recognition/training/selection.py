@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
+from ..core.coverage import features as coverage_features, unheard_share
 from ..core.evaluation import align
 from ..core.locator import calibrated_sigma, Locator, METRICS
 from ..core.metrics import expected_calibration_error
@@ -225,15 +226,49 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
         f'{scope}\'s references, k={k}, held-out mean error '
         f'{mean[best]:.2f} m; sigma from {int(calibrating.sum())} of '
         f'{int(placed.sum())} held-out scans')
+    sigma = calibrated_sigma(
+        error[calibrating],
+        np.concatenate(nearest[rep, metric, scope])[calibrating],
+        np.concatenate(predicted)[calibrating], n_classes)
     return {'neighbours': k, 'position_representation': rep,
             'position_metric': metric, 'position_scope': scope,
             'position_mean_error_m': mean[best],
             'position_median_error_m': float(np.median(error[placed])),
             'sigma_calibration_scans': int(calibrating.sum()),
-            'sigma_m': calibrated_sigma(
-                error[calibrating],
-                np.concatenate(nearest[rep, metric, scope])[calibrating],
-                np.concatenate(predicted)[calibrating], n_classes).tolist()}
+            'sigma_m': sigma.tolist(),
+            COVERAGE_EXAMPLES: _coverage_examples(
+                splits, predicted, n_classes, (rep, metric, scope), k,
+                sigma)}
+
+
+#: The key of the selection summary that carries the held-out scans'
+#: coverage features and labels to training (not kept in the model file).
+COVERAGE_EXAMPLES = 'coverage_examples'
+
+
+def _coverage_examples(splits, predicted, n_classes, space, k, sigma):
+    """
+    Return (features, covered, fold) of every held-out scan, as placed.
+
+    Among the kept scans of each fold, in the chosen space, with the
+    calibrated sigma (:func:`..core.coverage.features`).
+    """
+    rep, metric, scope = space
+    x, covered, fold = [], [], []
+    for f, (split, classes) in enumerate(zip(splits, predicted)):
+        keep = split.keep
+        locator = Locator.build(
+            split.fp.rssi[keep], split.y, split.fp.position[keep],
+            n_classes, k, sigma, representation=rep, metric=metric,
+            group=_groups(split.fp, split.all_y, n_classes, scope))
+        for rssi, c in zip(split.held_rssi, classes):
+            cols = np.flatnonzero(~np.isnan(rssi))
+            x.append(coverage_features(
+                locator, locator.distances(cols, signal(rssi[cols], rep), c),
+                c, unheard_share(locator, cols, c)))
+        covered.append(_covered(split))
+        fold.append(np.full(len(split.held_y), f))
+    return np.array(x), np.concatenate(covered), np.concatenate(fold)
 
 
 #: The sigma is calibrated on held-out scans taken within this many metres

@@ -17,7 +17,9 @@ from ..core.metrics import class_index
 from ..core.model import PlaceModel
 from ..data.fingerprints import check_trainable
 from .fitting import config_scaler, fit_network
-from .selection import calibrate, cross_validate, reference_locator, validate
+from .coverage import fit_coverage
+from .selection import (calibrate, COVERAGE_EXAMPLES, cross_validate,
+                        reference_locator, validate)
 
 #: Why a model trained without validation data keeps temperature 1.
 NOT_FITTED = ('nothing: without validation data the probabilities are the '
@@ -84,10 +86,12 @@ def train(fp, config, log=print, validation=None):
         nets.append(fit_network(fp.rssi, y, len(classes), scaler, config,
                                 report.epochs, config.seed + k,
                                 log=log)[0])
-    position = None
+    position = coverage = None
+    examples = report.selection.pop(COVERAGE_EXAMPLES, None)
     if fp.position is not None and 'sigma_m' in report.selection:
         position = reference_locator(fp, y.numpy(), len(classes),
                                      report.selection)
+        coverage = fit_coverage(*examples, log=log)
     elif one_class:
         raise ValueError('a one-class model is position-only: its position '
                          'uncertainty is calibrated on held-out scans, so '
@@ -115,7 +119,7 @@ def train(fp, config, log=print, validation=None):
     }
     model = PlaceModel(fp.ap_ids, scaler,
                        [net.frozen_layers() for net in nets], classes,
-                       provenance, position=position)
+                       provenance, position=position, coverage=coverage)
     if validation is not None and nets:
         c = provenance['calibration'] = calibrate(model, validation)
         model.temperature = c['temperature']

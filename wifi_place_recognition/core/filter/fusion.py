@@ -124,7 +124,7 @@ class Fusion:
         """Forget everything but the counts: the next scan starts afresh."""
         self.odom = deque(maxlen=self.limits.history)  # (t, x, y, yaw)
         self.pending = []       # (stamp, xy, place or None: not applied,
-        #                         arrival, sigma), in stamp order
+        #                         arrival, sigma, coverage), in stamp order
         self.anchor = None      # the odometry pose the particles are at
         self.place = None
         self.switch.reset()     # to another place: PlaceSwitch's rule
@@ -183,7 +183,7 @@ class Fusion:
             self.anchor = pose
 
     def scan(self, stamp, xy, place, confident=True, arrival=None,
-             sigma=None):
+             sigma=None, coverage=None):
         """
         Take one scan's answer; return the fused poses now available.
 
@@ -192,6 +192,7 @@ class Fusion:
         another place is not applied (its pose is the filter's).
         ``arrival``: when it arrived, on the clock :meth:`expire` is given
         (default: its stamp). ``sigma``: the scan's own (m; None: not
+        known); ``coverage``: P(taken where the survey covers; None: not
         known). A scan without a finite position is refused (counted,
         None returned).
         """
@@ -207,7 +208,7 @@ class Fusion:
             not moved
         self.pending.append((float(stamp), xy, place if apply else None,
                              float(stamp if arrival is None else arrival),
-                             sigma))
+                             sigma, coverage))
         self.pending.sort(key=lambda item: item[0])
         return self._advance()
 
@@ -267,7 +268,7 @@ class Fusion:
 
     def _apply(self, scan, odometry):
         """Apply one pending scan (place None: only move to it); its pose."""
-        stamp, xy, place, _, sigma = scan
+        stamp, xy, place, _, sigma, coverage = scan
         if place is None and not self.filter.started:
             return None
         restart = place is not None and (not self.filter.started or
@@ -301,7 +302,7 @@ class Fusion:
             misfit = self.misfit.add(stamp, xy, at[1:3]) if odometry \
                 else None
             sensor = self.filter.sensor
-            scan = sensor.measurement(xy, sigma, misfit)
+            scan = sensor.measurement(xy, sigma, misfit, coverage)
             self.counts['scans_off_track'] += sensor.off_track(scan)
             if self.filter.update(scan):
                 restart = True

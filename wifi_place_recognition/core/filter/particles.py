@@ -50,6 +50,8 @@ class FusionParams(SectionParams):
     track_s: float = 30.0             # s: scans compared with odometry
     track_scale: float = 2.0          # width at least their misfit x this
     wifi_outlier: float = 0.5         # likelihood floor (share of the peak)
+    coverage_full: float = 0.0        # P(covered) from which a scan counts
+    #                                   fully (0: every scan, coverage unused)
     start_sd: float = 3.0             # m: spread of a start around a scan
     reset_sigmas: float = 3.0         # a scan this many sd off disagrees
     reset_after: int = 10             # so many in a row: start afresh
@@ -65,6 +67,9 @@ class FusionParams(SectionParams):
             if value != int(value) or value > top:
                 raise ValueError(f'fusion parameter {name} = {value!r}: '
                                  f'expected a whole number up to {top}')
+        if self.coverage_full > 1:
+            raise ValueError(f'fusion parameter coverage_full = '
+                             f'{self.coverage_full!r}: expected 0 to 1')
         if self.wifi_outlier >= 1:
             raise ValueError(f'fusion parameter wifi_outlier = '
                              f'{self.wifi_outlier!r}: expected < 1')

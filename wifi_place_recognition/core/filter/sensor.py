@@ -5,7 +5,8 @@ The filter's sensor model: a WiFi scan's position, as far as it is trusted.
 sigma, its misfit to odometry); :class:`WifiSensorModel` weighs particles
 by it. Another model (e.g. a per-AP radio map) brings its own measurement
 type and the same methods: ``measurement`` (from a scan's answer),
-``off_track``, ``centre``, ``disagrees``, ``likelihood``.
+``off_track``, ``centre``, ``trust``, ``testifies``, ``disagrees``,
+``likelihood``.
 """
 
 from dataclasses import dataclass, replace
@@ -21,6 +22,14 @@ class WifiPosition:
     xy: np.ndarray             # (2,) m, map frame
     sigma: float = None        # m: the scan's own (None: not known)
     misfit: float = None       # m: the recent scans' (:class:`TrackMisfit`)
+    coverage: float = None     # P(taken where the survey covers); None: 1
+
+    @property
+    def covered(self):
+        """Return P(covered), 1 when not known."""
+        c = self.coverage
+        return 1.0 if c is None or not math.isfinite(c) else \
+            min(max(float(c), 0.0), 1.0)
 
 
 class WifiSensorModel:
@@ -35,7 +44,10 @@ class WifiSensorModel:
     survey has no scan, the k-NN snaps to the nearest surveyed stretch
     for as long as the robot is away from it, its errors along the run are
     not independent, and scans that move unlike the robot are trusted
-    less, so the pose follows odometry there.
+    less, so the pose follows odometry there. With ``coverage_full`` > 0
+    a scan counts as far as it was likely taken where the survey covers
+    (its ``coverage``): one likely off the survey moves the particles
+    little and never counts towards a restart.
     """
 
     def __init__(self, params):
@@ -51,9 +63,9 @@ class WifiSensorModel:
             width = max(width, p.track_scale * scan.misfit)
         return width
 
-    def measurement(self, xy, sigma, misfit):
+    def measurement(self, xy, sigma, misfit, coverage=None):
         """Return the :class:`WifiPosition` of a scan's answer."""
-        return WifiPosition(xy, sigma, misfit)
+        return WifiPosition(xy, sigma, misfit, coverage)
 
     def off_track(self, scan):
         """Return True when the scan's misfit widened it."""
@@ -71,16 +83,38 @@ class WifiSensorModel:
         With the scan's width before its misfit: scans that jump away from
         odometry for good (a kidnapped robot) keep disagreeing.
         """
+        if not self.testifies(scan):
+            return False
         width = self.width(replace(scan, misfit=None))
         cov = cov + np.eye(2) * width ** 2
         delta = scan.xy - xy
         return delta @ np.linalg.solve(cov, delta) > \
             self.params.reset_sigmas ** 2
 
+    def trust(self, scan):
+        """
+        Return how far ``scan`` counts (0 to 1) by its coverage.
+
+        min(P(covered) / ``coverage_full``, 1); 1 with ``coverage_full`` 0
+        (coverage unused).
+        """
+        full = self.params.coverage_full
+        return 1.0 if not full else min(scan.covered / full, 1.0)
+
+    def testifies(self, scan):
+        """Return True when ``scan`` counts at least half (covered ground)."""
+        return self.trust(scan) >= 0.5
+
     def likelihood(self, state, scan):
-        """Return how likely each particle is, given ``scan`` (peak 1)."""
+        """
+        Return how likely each particle is, given ``scan`` (peak 1).
+
+        A scan off the survey explains nothing: the Gaussian over its floor
+        counts as far as the scan is trusted (:meth:`trust`), a flat 1 the
+        rest.
+        """
         p = self.params
         width = self.width(scan)
         d2 = ((state[:, :2] - scan.xy) ** 2).sum(axis=1)
-        return (1 - p.wifi_outlier) * np.exp(-d2 / (2 * width * width)) + \
-            p.wifi_outlier
+        weight = (1 - p.wifi_outlier) * self.trust(scan)
+        return weight * np.exp(-d2 / (2 * width * width)) + 1 - weight

@@ -1,0 +1,142 @@
+"""
+The coverage model: learned from the survey alone, kept in the model file,
+read by the filter (no ROS).
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from wifi_place_recognition.core.artifact import (load_model, ModelFileError,
+                                                  save_model)
+from wifi_place_recognition.core.coverage import CoverageModel, FEATURES
+from wifi_place_recognition.core.evaluation import align
+from wifi_place_recognition.core.filter.particles import (FusionParams,
+                                                          ParticleFilter)
+from wifi_place_recognition.core.filter.sensor import (WifiPosition,
+                                                       WifiSensorModel)
+from wifi_place_recognition.data.fingerprints import read_fingerprints
+from wifi_place_recognition.training.coverage import (auc, fit_coverage,
+                                                      reliability)
+
+ROBOT = Path(__file__).resolve().parents[2] / 'shared' / 'datasets' / \
+    'robot' / 'b24'
+
+
+def _model(**change):
+    values = dict(mean=(0.0,) * 4, scale=(1.0,) * 4,
+                  coef=(-2.0, 0.0, 0.0, -1.0), intercept=1.0)
+    values.update(change)
+    return CoverageModel(**values)
+
+
+def test_the_probability_falls_as_the_answer_looks_unlike_the_survey():
+    model = _model()
+    near, far = model.probability([[-1.0, 0, 0, 0.0], [2.0, 0, 0, 0.5]])
+    assert near > 0.9 and far < 0.1
+
+
+@pytest.mark.parametrize('change, named', [
+    ({'coef': (1.0, float('nan'), 0.0, 0.0)}, 'coef'),
+    ({'scale': (1.0, 0.0, 1.0, 1.0)}, 'scale'),
+    ({'mean': (0.0,) * 3}, 'mean'),
+    ({'intercept': 'x'}, 'intercept'),
+    ({'features': ('log_sigma',)}, 'features'),
+])
+def test_a_bad_coverage_section_is_refused_naming_it(change, named):
+    with pytest.raises(ValueError, match=named):
+        _model(**change)
+
+
+def test_fit_learns_from_held_out_scans_and_reports_its_reliability():
+    rng = np.random.default_rng(0)
+    covered = rng.random(600) < 0.5
+    x = rng.normal(size=(600, len(FEATURES)))
+    x[:, 0] += np.where(covered, -1.0, 1.0)     # farther when not covered
+    model = fit_coverage(x, covered, np.arange(600) % 4, log=lambda _: None)
+    report = model.report
+    assert report['auc'] > 0.8
+    assert report['covered'] + report['not_covered'] == 600
+    assert report['ece'] < 0.1
+    assert sum(b['scans'] for b in report['reliability']) == 600
+    assert fit_coverage(x[:30], covered[:30], np.arange(30) % 4,
+                        log=lambda _: None) is None    # too few to learn
+
+
+def test_auc_and_reliability_are_what_they_say():
+    assert auc([0.1, 0.2, 0.8, 0.9], [False, False, True, True]) == 1.0
+    assert auc([0.5, 0.5], [False, True]) == 0.5
+    table, ece = reliability(np.array([0.1, 0.1, 0.9, 0.9]),
+                             np.array([False, False, True, True]))
+    assert [b['scans'] for b in table] == [2, 2]
+    assert ece == pytest.approx(0.1)
+
+
+def test_a_scan_off_the_survey_moves_no_particle_and_never_restarts():
+    params = FusionParams(particles=200, coverage_full=0.5)
+    sensor = WifiSensorModel(params)
+    state = np.zeros((3, 4))
+    state[:, 0] = (0.0, 5.0, 10.0)
+    off = WifiPosition(np.zeros(2), coverage=0.0)
+    on = WifiPosition(np.zeros(2), coverage=0.9)
+    assert np.allclose(sensor.likelihood(state, off), 1.0)
+    assert sensor.likelihood(state, on)[2] < 0.6
+    pf = ParticleFilter(params, seed=0)
+    pf.start(np.zeros(2))
+    far = WifiPosition(np.array([50.0, 0.0]), coverage=0.0)
+    assert not any(pf.update(far) for _ in range(3 * params.reset_after))
+    # the same scans from covered ground restart it
+    far = WifiPosition(np.array([50.0, 0.0]), coverage=0.9)
+    assert any(pf.update(far) for _ in range(params.reset_after))
+
+
+def test_coverage_full_zero_leaves_the_filter_as_it_was():
+    sensor = WifiSensorModel(FusionParams())
+    state = np.zeros((2, 4))
+    state[1, 0] = 8.0
+    assert np.array_equal(
+        sensor.likelihood(state, WifiPosition(np.zeros(2), coverage=0.0)),
+        sensor.likelihood(state, WifiPosition(np.zeros(2))))
+    with pytest.raises(ValueError, match='coverage_full'):
+        FusionParams(coverage_full=1.5)
+
+
+@pytest.mark.skipif(not ROBOT.exists(), reason='robot runs not available')
+def test_train_model_learns_coverage_from_a_robot_run(tmp_path):
+    from wifi_place_recognition.cli.train_model import main
+    scans = ROBOT / 'b24test2' / 'scans.csv'
+    lines = scans.read_text().splitlines(True)
+    # a survey with a hole: the middle fifth of the run cut out
+    n = len(lines) - 1
+    cut = range(1 + 2 * n // 5, 1 + 3 * n // 5)
+    survey = tmp_path / 'survey.csv'
+    survey.write_text(''.join(line for i, line in enumerate(lines)
+                              if i not in cut))
+    path = tmp_path / 'm.npz'
+    assert main(['--data', str(survey), '-o', str(path), '--quiet']) == 0
+    model = load_model(path)
+    report = model.coverage.report
+    assert report['auc'] > 0.5 and 0 <= report['ece'] < 0.5
+    save_model(model, tmp_path / 'again.npz')
+    assert load_model(tmp_path / 'again.npz').coverage == model.coverage
+    # the cut scans far from every kept one look less covered than the rest
+    run = read_fingerprints(ROBOT / 'b24test3' / 'scans.csv')
+    probability = model.predict_positions(align(model, run),
+                                          coverage=True)[3]
+    assert np.isfinite(probability).all()
+    assert ((0 <= probability) & (probability <= 1)).all()
+    held = read_fingerprints(scans)
+    p_held = model.predict_positions(align(model, held), coverage=True)[3]
+    middle = np.zeros(len(p_held), bool)
+    middle[2 * n // 5 + 20:3 * n // 5 - 20] = True  # inside the hole
+    assert p_held[middle].mean() < p_held[~middle].mean()
+
+
+def test_a_coverage_section_without_a_position_output_is_refused(
+        synthetic, tmp_path):
+    model = load_model(synthetic[1])
+    model.coverage = _model()
+    save_model(model, tmp_path / 'm.npz')
+    with pytest.raises(ModelFileError, match='coverage section needs a '
+                                             'position output'):
+        load_model(tmp_path / 'm.npz')

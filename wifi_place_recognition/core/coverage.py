@@ -1,0 +1,150 @@
+"""
+Was a scan taken where the survey covers? A small model of the answer.
+
+Where the survey never went, the k-NN position snaps to the nearest
+surveyed stretch, and its sigma says little about that. The answer leaves
+traces, though: the nearest references are farther in signal space, their
+positions scatter, and the scan hears APs the references never heard.
+:func:`features` reads them from one scan's distances to the references;
+:class:`CoverageModel` (a logistic regression on them) turns them into the
+probability that the scan lies within a few metres of a survey scan.
+Training fits it on the survey alone (:mod:`..training.coverage`): the
+cross-validation folds hold out stretches of the survey, and each held-out
+scan is labelled covered when a kept scan lies near it. Numpy only.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+#: What :func:`features` returns, in order.
+FEATURES = ('log_sigma', 'log_neighbour_ratio', 'log_spread',
+            'unheard_share')
+#: Metres added to the neighbours' spread before its log (0 is common).
+SPREAD_FLOOR = 0.5
+#: Neighbours the features look at (whatever k the position uses).
+NEIGHBOURS = 5
+
+
+def features(locator, distance, c, unheard_share):
+    """
+    Return the :data:`FEATURES` of one scan (an array), NaN if unplaced.
+
+    ``distance``: the scan's distance to each reference class ``c``
+    searches (:meth:`.locator.Locator.distances`); ``unheard_share``: the
+    share of the scan's APs that no reference there heard (APs unknown
+    to the model included). The sigma is the class's calibrated one;
+    the neighbour ratio is the :data:`NEIGHBOURS` nearest distances' mean
+    over the nearest; the spread is their references' distance-weighted
+    spatial standard deviation (m).
+    """
+    out = np.full(len(FEATURES), np.nan)
+    if not len(distance):
+        return out
+    k = min(NEIGHBOURS, len(distance))
+    near = np.argpartition(distance, k - 1)[:k]
+    d = np.maximum(distance[near], 1e-6)
+    weight = 1.0 / d
+    weight /= weight.sum()
+    xy = locator.reference_xy(c)[near].astype(np.float64)
+    centre = weight @ xy
+    spread = math.sqrt(float(weight @ ((xy - centre) ** 2).sum(axis=1)))
+    nearest = float(d.min())
+    out[:] = (math.log(max(float(locator.sigma[c]) * nearest, 1e-3)),
+              math.log(float(d.mean()) / nearest),
+              math.log(spread + SPREAD_FLOOR), unheard_share)
+    return out
+
+
+def unheard_share(locator, columns, c, unknown=0):
+    """
+    Return the share of a scan's APs no reference of class ``c`` heard.
+
+    ``columns``: the scan's model AP columns; ``unknown``: how many more
+    APs it heard that the model does not know.
+    """
+    heard = len(columns) + unknown
+    if not heard:
+        return 1.0
+    g = locator.group[c]
+    return (unknown + int((locator.row_of[g, columns] < 0).sum())) / heard
+
+
+@dataclass(frozen=True)
+class CoverageModel:
+    """
+    P(covered | features): a logistic regression on standardised features.
+
+    ``report``: how it was fitted and how reliable it was on held-out
+    stretches of the survey (free-form, JSON-ready).
+    """
+
+    SECTION = 'coverage'
+
+    mean: tuple
+    scale: tuple
+    coef: tuple
+    intercept: float
+    features: tuple = FEATURES
+    report: dict = None
+
+    def __post_init__(self):
+        """Refuse a model that does not fit :data:`FEATURES`."""
+        if tuple(self.features) != FEATURES:
+            raise ValueError(f'coverage features {list(self.features)}: '
+                             f'this version computes {list(FEATURES)}')
+        n = len(FEATURES)
+        for name in ('mean', 'scale', 'coef'):
+            value = getattr(self, name)
+            if not (isinstance(value, (list, tuple)) and len(value) == n
+                    and all(_finite(v) for v in value)):
+                raise ValueError(f'coverage {name} = {value!r}: expected '
+                                 f'{n} finite numbers')
+        if not all(v > 0 for v in self.scale):
+            raise ValueError(f'coverage scale = {list(self.scale)!r}: '
+                             f'expected numbers > 0')
+        if not _finite(self.intercept):
+            raise ValueError(f'coverage intercept = {self.intercept!r}: '
+                             f'expected a finite number')
+        if self.report is not None and not isinstance(self.report, dict):
+            raise ValueError('coverage report must be an object')
+        object.__setattr__(self, '_w', np.asarray(self.coef, np.float64) /
+                           np.asarray(self.scale, np.float64))
+        object.__setattr__(self, '_b', float(self.intercept) - float(
+            self._w @ np.asarray(self.mean, np.float64)))
+
+    def probability(self, x):
+        """Return P(covered) of feature rows ``x`` ((n, F) or (F,))."""
+        z = np.clip(np.asarray(x, np.float64) @ self._w + self._b, -30, 30)
+        return 1.0 / (1.0 + np.exp(-z))
+
+    def to_dict(self):
+        """Return the model file's section."""
+        return {'features': list(self.features), 'mean': list(self.mean),
+                'scale': list(self.scale), 'coef': list(self.coef),
+                'intercept': self.intercept, 'report': self.report}
+
+    @classmethod
+    def from_dict(cls, data):
+        """Build from a file's section; raise ValueError naming the fault."""
+        if not isinstance(data, dict):
+            raise ValueError(f'coverage must be an object, got '
+                             f'{type(data).__name__}')
+        unknown = sorted(set(data) - {'features', 'mean', 'scale', 'coef',
+                                      'intercept', 'report'})
+        if unknown:
+            raise ValueError(f'unknown coverage key(s) {", ".join(unknown)}')
+        try:
+            return cls(tuple(data['mean']), tuple(data['scale']),
+                       tuple(data['coef']), data['intercept'],
+                       tuple(data['features']), data.get('report'))
+        except KeyError as exc:
+            raise ValueError(f'coverage: {exc.args[0]} missing') from None
+        except TypeError as exc:
+            raise ValueError(f'coverage: {exc}') from None
+
+
+def _finite(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool) \
+        and math.isfinite(value)
