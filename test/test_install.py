@@ -20,7 +20,10 @@ import numpy as np
 import pytest
 from ros_helpers import Client, NodeProcess
 from wifi_place_recognition.core.artifact import load_model
-from wifi_place_recognition.ros import classifier_parameters
+from wifi_place_recognition.ros import (classifier_parameters,
+                                        monitor_parameters,
+                                        scanner_parameters)
+import yaml
 
 PROBE = (['WAP001', 'WAP002', 'WAP003', 'WAP004'], [-60.0, -70.0, -80.0, -50.0])
 SHIPPED = Path('share', 'wifi_place_recognition', 'models', 'ujiindoorloc.npz')
@@ -59,7 +62,10 @@ def test_colcon_installed_executable_answers(ros, tmp_path):
     executable = prefix / 'lib' / 'wifi_place_recognition' / 'classifier_node'
     assert executable.exists()
     for name in ('models/ujiindoorloc.npz', 'package.xml',
-                 'config/classifier_node.yaml', 'launch/classifier.launch.py'):
+                 'config/classifier_node.yaml', 'launch/classifier.launch.py',
+                 'config/wifi_localization.yaml',
+                 'config/diagnostic_analyzers.yaml',
+                 'launch/wifi_localization.launch.py'):
         assert (prefix / 'share' / 'wifi_place_recognition' / name).exists()
     # What `source install/setup.bash` sets for this package.
     site = next(prefix.glob('lib/python3*/site-packages'))
@@ -231,3 +237,93 @@ def test_launch_file_declares_described_arguments_it_uses():
     assert kwargs['executable'].value == 'classifier_node'
     remapped = [pair.elts[0].value for pair in kwargs['remappings'].elts]
     assert remapped == ['wifi/scan', 'odom', 'initialpose'], remapped
+
+
+def _assigned(tree, name):
+    """Return the literal value of a module-level ``name = ...``."""
+    value, = [ast.literal_eval(node.value) for node in tree.body
+              if isinstance(node, ast.Assign) and
+              node.targets[0].id == name]
+    return value
+
+
+def test_robot_launch_file_switches_each_node_and_shares_the_model():
+    # launch and launch_ros are not on PyPI: check the file's structure.
+    tree = ast.parse((REPO / 'launch' / 'wifi_localization.launch.py')
+                     .read_text())
+    nodes, parameters, remaps = (_assigned(tree, name) for name in
+                                 ('NODES', 'PARAMETERS', 'REMAPS'))
+    tables = {'wifi_scanner_node': scanner_parameters,
+              'classifier_node': classifier_parameters,
+              'localization_monitor': monitor_parameters}
+    # one switch per node, each an executable of the package
+    assert {s: e for s, (e, _) in nodes.items()} == {
+        'scanner': 'wifi_scanner_node', 'classifier': 'classifier_node',
+        'monitor': 'localization_monitor'}
+    scripts = (REPO / 'setup.py').read_text()
+    assert all(f"'{e} = " in scripts for e, _ in nodes.values())
+    # the model and the frames set on both nodes that use them
+    assert parameters['model_path'][0] == parameters['frame_id'][0] == (
+        'classifier_node', 'localization_monitor')
+    for name, (owners, description) in parameters.items():
+        assert len(description) > 20, name
+        for owner in owners:
+            assert name in {p[0] for p in tables[owner].PARAMETERS}, \
+                (name, owner)
+    # each remapped topic is one a node uses, under that name
+    for argument, (topic, default, description) in remaps.items():
+        assert topic == default and len(description) > 20, argument
+        assert any(topic == t[1] for table in tables.values()
+                   for t in table.TOPICS), topic
+    declared = {}
+    for call in _calls(tree, 'DeclareLaunchArgument'):
+        kwargs = {k.arg: k.value for k in call.keywords}
+        assert {'default_value', 'description'} <= set(kwargs), \
+            ast.dump(call)
+        if isinstance(call.args[0], ast.Constant):
+            declared[call.args[0].value] = kwargs['default_value']
+        else:   # one per entry of a table
+            table = {'switch': nodes, 'argument': remaps,
+                     'name': parameters}[call.args[0].id]
+            declared.update(dict.fromkeys(table, kwargs['default_value']))
+    assert set(declared) == {'params_file'} | set(nodes) | set(remaps) | \
+        set(parameters)
+    used = {call.args[0].value for call in _calls(tree, 'LaunchConfiguration')
+            if isinstance(call.args[0], ast.Constant)}
+    assert used == {'params_file'}, used     # the others through the tables
+    config = [a.value for a in ast.walk(declared['params_file'])
+              if isinstance(a, ast.Constant)]
+    assert config[-2:] == ['config', 'wifi_localization.yaml'], config
+    node, = _calls(tree, 'Node')
+    kwargs = {k.arg: k.value for k in node.keywords}
+    assert {'executable', 'name', 'condition', 'parameters',
+            'remappings'} <= set(kwargs)
+    condition, = _calls(kwargs['condition'], 'IfCondition')
+
+
+def test_robot_params_file_holds_every_nodes_defaults():
+    config = yaml.safe_load((REPO / 'config' / 'wifi_localization.yaml')
+                            .read_text())
+    tables = {'wifi_scanner_node': scanner_parameters,
+              'classifier_node': classifier_parameters,
+              'localization_monitor': monitor_parameters}
+    assert list(config) == list(tables)
+    for node, table in tables.items():
+        values = config[node]['ros__parameters']
+        assert list(values) == [p[0] for p in table.PARAMETERS], node
+        for name, default, _ in table.PARAMETERS:
+            assert values[name] == default, (node, name)
+            assert type(values[name]) is type(default), (node, name)
+
+
+def test_diagnostic_analyzer_example_groups_every_node_and_is_shown():
+    path = REPO / 'config' / 'diagnostic_analyzers.yaml'
+    analyzer = yaml.safe_load(path.read_text())['analyzers'][
+        'ros__parameters']['wifi_localization']
+    assert analyzer['type'] == 'diagnostic_aggregator/GenericAnalyzer'
+    nodes = _assigned(ast.parse((REPO / 'launch' /
+                                 'wifi_localization.launch.py').read_text()),
+                      'NODES')
+    assert analyzer['startswith'] == [e for e, _ in nodes.values()]
+    # doc/nav2.md shows the file as it is
+    assert path.read_text() in (REPO / 'doc' / 'nav2.md').read_text()
