@@ -9,12 +9,14 @@ latched ``~/current_place``. With a model that has a position output, also
 a ``geometry_msgs/PoseWithCovarianceStamped`` on ``~/pose`` per answer;
 ``initialpose`` gets the next confident one after a ``~/publish_initial_pose``
 request and, with ``initial_pose_on_change``, every confident one that
-changes the building/floor or whose position jumps (:mod:`.place_changes`).
-While odometry arrives on ``odom`` (``fusion``), ``~/pose`` is the pose
-fused with it, with a yaw, at every scan and in between
-(:mod:`.odometry_fusion`), and ``initialpose`` carries it: after a change
-of floor, the filter's first pose there; instead of the scans' jumps, the
-filter's fresh starts on its floor.
+changes the building/floor or whose position jumps. While odometry
+arrives on ``odom`` (``fusion``), ``~/pose`` is the pose fused with it,
+with a yaw, at every scan and in between (:mod:`.odometry_fusion`), and
+``initialpose`` carries it: after a change of floor, the filter's first
+pose there; instead of the scans' jumps, the filter's fresh starts on its
+floor. The node only adapts :class:`.scan_pipeline.ScanPipeline`, which
+decides all of this (ROS-free, the benchmarks' too): messages, timers,
+QoS and logs are the node's.
 Inference is a numpy forward pass: torch is never imported. Each scan is
 processed in the subscription callback. The subscription keeps one scan
 (KEEP_LAST, depth 1): a scan that arrives while another is processed
@@ -27,7 +29,6 @@ import copy
 import math
 import sys
 import time
-from collections import Counter
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
@@ -39,23 +40,26 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from ..core.artifact import load_model, ModelFileError
+from ..core.pipeline.scan_pipeline import ScanPipeline, SETTINGS
+from ..core.recognizer import OK, PlaceRecognizer, WARN
+from ..core.resources import default_model_path
+from ..core.scan import REJECT_REASONS
 from .classifier_parameters import (check_frame, declare, no_position,
                                     RECOGNIZER_SETTINGS, refusal)
 from .messages import (key_value as _kv, pose_message, stamp_time,
                        yaw_text)
 from .odometry_fusion import OdometryFusion
-from .place_changes import PlaceChanges
+from .place_changes import CurrentPlace
 from .runner import names_the_node, run
 from .sequence import PublisherGaps
-from ..core.recognizer import OK, PlaceRecognizer, WARN
-from ..core.resources import default_model_path
-from ..core.scan import REJECT_REASONS, ScanRejected
 
 LEVELS = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN}
 THROTTLE_S = 5.0
 # Sensor-data QoS that keeps only the newest scan waiting.
 SCAN_QOS = copy.copy(qos_profile_sensor_data)
 SCAN_QOS.depth = 1
+#: The parameters :meth:`ScanPipeline.configure` takes.
+PIPELINE_SETTINGS = RECOGNIZER_SETTINGS + SETTINGS
 
 
 def _memory_mib():
@@ -79,7 +83,7 @@ def _memory_mib():
 
 class ClassifierNode(Node):
     """
-    Thin ROS adapter around :class:`PlaceRecognizer`.
+    Thin ROS adapter around :class:`.scan_pipeline.ScanPipeline`.
 
     ``make_forward(model)`` may supply another forward pass (a benchmark
     baseline); the default is the recognizer's numpy one.
@@ -90,42 +94,38 @@ class ClassifierNode(Node):
         super().__init__('classifier_node', **kwargs)
         values = declare(self)
         self.odometry = None    # OdometryFusion, with a position model
-        model_path = values['model_path'] or str(default_model_path())
+        self.model_path = values['model_path'] or str(default_model_path())
         self.frame_id = values['frame_id']
         check_frame(self.frame_id)
-        self._send_initial_pose = values['publish_initial_pose']
-        self.reseed_on_change = values['initial_pose_on_change']
-        jump_threshold = values['jump_threshold']
-
-        self.model_path = model_path
-        model = load_model(model_path)
-        self.recognizer = PlaceRecognizer(
-            model, forward=make_forward(model) if make_forward else None)
-        self.recognizer.configure(**{
-            name: self.get_parameter(name).value
-            for name in RECOGNIZER_SETTINGS})
-        self.prob_keys = [f'prob/{n}' for n in
-                          self.recognizer.model.class_names]
+        model = load_model(self.model_path)
+        if model.position is None and (values['publish_initial_pose'] or
+                                       values['initial_pose_on_change']):
+            raise ValueError(no_position(
+                'publish_initial_pose' if values['publish_initial_pose']
+                else 'initial_pose_on_change'))
+        self.pipeline = ScanPipeline(PlaceRecognizer(
+            model, forward=make_forward(model) if make_forward else None))
+        self.pipeline.configure(**{name: values[name]
+                                   for name in PIPELINE_SETTINGS})
+        if values['publish_initial_pose']:
+            self.pipeline.request_initial_pose()
+        self.prob_keys = [f'prob/{n}' for n in model.class_names]
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
 
         self.status_name = f'{self.get_name()}: place'
-        self.counts = Counter(received=0, answered=0, rejected=0, dropped=0)
         self._gaps = PublisherGaps()
-        self.last_latency_ms = math.nan
         self.place_pub = self.create_publisher(
             DiagnosticArray, '~/place',
             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
-        self.changes = PlaceChanges(self, jump_threshold)
+        self.current_place = CurrentPlace(self)
         self._scan_sub = self.create_subscription(
             JointState, 'wifi/scan', self._on_scan, SCAN_QOS,
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.create_timer(1.0, self._publish_health)
         self.create_service(Trigger, '~/reset', self._on_reset)
-        self.pose_pub = self.initial_pose_pub = None
-        self._initial_pending = None    # (stamp s, reasons, place): fused
         if model.position is not None:
             self.pose_pub = self.create_publisher(
                 PoseWithCovarianceStamped, '~/pose', 10)
@@ -133,65 +133,45 @@ class ClassifierNode(Node):
                 PoseWithCovarianceStamped, 'initialpose', 1)
             self.create_service(Trigger, '~/publish_initial_pose',
                                 self._on_publish_initial_pose)
-            self.odometry = OdometryFusion(
-                self, model.fusion, values['odom_timeout'],
-                values['pose_rate'], self._publish_fused)
-            self.odometry.enable(values['fusion'])
-        elif self._send_initial_pose or self.reseed_on_change:
-            raise ValueError(no_position('publish_initial_pose' if
-                                         self._send_initial_pose else
-                                         'initial_pose_on_change'))
-        provenance = self.recognizer.model.provenance
+            self.odometry = OdometryFusion(self, self.pipeline,
+                                           self._publish)
         self.get_logger().info(
-            f'model {model_path}: {len(self.recognizer.model.ap_ids)} APs, '
+            f'model {self.model_path}: {len(model.ap_ids)} APs, '
             f'{len(self.prob_keys)} classes (trained '
-            f'{provenance.get("created", "?")})')
+            f'{model.provenance.get("created", "?")})')
 
     # parameters -----------------------------------------------------------
     def _validate_parameters(self, params):
         for p in params:
             reason = refusal(p.name, p.value,
-                             self.recognizer.model.position is not None)
+                             self.pipeline.fusion is not None)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params):
         values = {p.name: p.value for p in params}
-        self.recognizer.configure(**{
-            name: value for name, value in values.items()
-            if name in RECOGNIZER_SETTINGS})
+        self.pipeline.configure(**{name: value for name, value in
+                                   values.items()
+                                   if name in PIPELINE_SETTINGS})
         self.frame_id = values.get('frame_id', self.frame_id)
-        self.reseed_on_change = values.get('initial_pose_on_change',
-                                           self.reseed_on_change)
-        self.changes.jump_threshold = values.get(
-            'jump_threshold', self.changes.jump_threshold)
         if self.odometry is not None:
-            self.odometry.configure(values.get('odom_timeout'),
-                                    values.get('pose_rate'))
-            if 'fusion' in values:
-                self.odometry.enable(values['fusion'])
+            self.odometry.apply(values)
 
     def _on_publish_initial_pose(self, request, response):
-        self._send_initial_pose = True
+        self.pipeline.request_initial_pose()
+        recognizer = self.pipeline.recognizer
         response.success = True
         response.message = (
             f'the next confident answer (p >= '
-            f'{self.recognizer.min_confidence:g}, >= '
-            f'{self.recognizer.min_known_aps} known APs) goes to '
+            f'{recognizer.min_confidence:g}, >= '
+            f'{recognizer.min_known_aps} known APs) goes to '
             f'{self.initial_pose_pub.topic_name}')
         self.get_logger().info(response.message)
         return response
 
     def _on_reset(self, request, response):
-        tracker = self.recognizer.tracker
-        cleared = []
-        if tracker is not None:
-            tracker.reset()
-            cleared.append('tracked belief')
-        if self.odometry is not None and self.odometry.enabled:
-            self.odometry.reset()
-            cleared.append('fused pose')
+        cleared = self.pipeline.reset()
         response.message = (f'{" and ".join(cleared)} cleared: the next '
                             f'scan starts afresh' if cleared else
                             'tracking and fusion are off: nothing to reset')
@@ -202,27 +182,28 @@ class ClassifierNode(Node):
     # scans ----------------------------------------------------------------
     def _on_scan(self, msg, info):
         received_at = time.perf_counter()
-        replaced = self._gaps.missed(self._scan_sub, info)
-        self.counts['received'] += 1 + replaced
-        self.counts['dropped'] += replaced
-        self._process(msg, received_at)
+        self._process(msg, received_at,
+                      self._gaps.missed(self._scan_sub, info))
 
-    def _process(self, msg, received_at):
+    def _process(self, msg, received_at, dropped=0):
         stamp = msg.header.stamp
+        out = self.pipeline.scan(msg.name, msg.position,
+                                 stamp_time(stamp, self.get_clock()),
+                                 time.monotonic(), stamp, dropped,
+                                 received_at)
         status = DiagnosticStatus(name=self.status_name,
                                   hardware_id=msg.header.frame_id)
-        try:
-            place = self.recognizer.classify(
-                msg.name, msg.position, stamp_time(stamp, self.get_clock()))
-        except ScanRejected as exc:
-            self._reject(status, exc.reason, str(exc), stamp)
-            return
-        except Exception as exc:  # never let one scan stop the node
-            self._reject(status, 'internal_error', repr(exc), stamp)
+        place = out.answer
+        if place is None:
+            status.level = DiagnosticStatus.ERROR
+            status.message = f'scan rejected: {out.rejected.detail}'
+            status.values = [_kv('reason', out.rejected.reason)]
+            self._publish_answer(status, stamp)
+            self.get_logger().warn(status.message,
+                                   throttle_duration_sec=THROTTLE_S)
             return
         status.level = LEVELS[place.level]
         status.message = place.message
-        latency_ms = (time.perf_counter() - received_at) * 1e3
         status.values = [
             _kv('building', place.building), _kv('floor', place.floor),
             _kv('confidence', f'{place.confidence:.6f}'),
@@ -232,31 +213,16 @@ class ClassifierNode(Node):
             _kv('known_aps', place.known_aps),
             _kv('unknown_aps', place.unknown_aps),
             _kv('clipped_rssi', place.clipped),
-            _kv('latency_ms', f'{latency_ms:.3f}'),
+            _kv('latency_ms', f'{out.latency_ms:.3f}'),
         ] + [_kv(k, f'{p:.6f}') for k, p in
              zip(self.prob_keys, place.probabilities)]
         if place.position is not None:
             status.values += self._position_values(place)
-        self.last_latency_ms = latency_ms
-        self.counts['answered'] += 1
         self._publish_answer(status, stamp)
-        confident = status.level == DiagnosticStatus.OK
-        fusing = self.odometry is not None and self.odometry.active
-        key = (place.building, place.floor)
-        reasons = self.changes.follow(place, confident, stamp,
-                                      self._frame(key), jumps=not fusing)
-        if place.position is None:
-            return
-        reasons = reasons if self.reseed_on_change else []
-        if not fusing:
-            self._forget_pending()
-        if confident and self._send_initial_pose:
-            self._send_initial_pose = False
-            reasons = reasons + ['requested']
-        if fusing:
-            self._fuse(place, key, stamp, confident, reasons)
-        else:
-            self._publish_pose(place, key, stamp, reasons)
+        if out.place_changed:
+            self.current_place.publish(place, stamp, self._frame(
+                (place.building, place.floor)))
+        self._publish(out)
 
     def _publish_answer(self, status, stamp):
         out = DiagnosticArray(status=[status])
@@ -277,83 +243,32 @@ class ClassifierNode(Node):
         """Return the frame of ``place`` (building, floor)."""
         return self.frame_id.format(building=place[0], floor=place[1])
 
-    def _fuse(self, place, key, stamp, confident, reasons):
-        """
-        Feed the scan's own position to the filter; initialpose waits.
+    def _publish(self, out):
+        """Publish an output's poses (and re-seeds); log its problems."""
+        for problem in out.problems:
+            self.get_logger().warn(problem, throttle_duration_sec=THROTTLE_S)
+        for pose in out.poses:
+            msg = pose_message(pose.xy, pose.cov, pose.source,
+                               self._frame(pose.place), pose.yaw)
+            self.pose_pub.publish(msg)
+            if pose.initial:
+                self._send_initial(msg, pose)
 
-        The filter follows the answer's place (the tracked one with
-        tracking), as ``~/place`` and ``~/current_place`` do. A re-seed
-        waits for the first fused pose from this scan on in that place:
-        after a change of floor, the filter's start there (at the second
-        confident answer in a row), never the old floor's pose.
-        """
-        if reasons:
-            self._initial_pending = (stamp_time(stamp, self.get_clock()),
-                                     reasons, key)
-        self.odometry.scan(stamp, place.scan_position, key, confident,
-                           place.scan_sigma)
-
-    def _forget_pending(self):
-        """Fusion stopped before a re-seed went out: a request waits on."""
-        if self._initial_pending is not None:
-            if 'requested' in self._initial_pending[1]:
-                self._send_initial_pose = True
-            self._initial_pending = None
-
-    def _publish_fused(self, fused, stamp, place, relocated):
-        """
-        Publish a fused pose; on initialpose too when a re-seed is due.
-
-        Due: the pending one (:meth:`_fuse`), or, with
-        ``initial_pose_on_change``, a ``relocated`` filter (it started
-        afresh on the floor it was on: the scans kept disagreeing with it,
-        as when the robot is carried away, or it ran on WiFi alone for
-        long), which with fusion stands for the scans' own jumps.
-        """
-        pose = pose_message(fused.xy, fused.cov, stamp, self._frame(place),
-                            fused.yaw)
-        self.pose_pub.publish(pose)
-        waiting, reasons = self._initial_pending, None
-        if waiting is not None and fused.stamp >= waiting[0] and \
-                place == waiting[2]:
-            self._initial_pending, reasons = None, waiting[1]
-        elif relocated and self.reseed_on_change:
-            reasons = ['the fused pose started afresh']
-        if reasons:
-            self._send_initial(pose, reasons, place,
-                               f'fused with odometry, {yaw_text(pose)}')
-
-    def _publish_pose(self, place, key, stamp, reasons):
-        pose = pose_message(place.position, place.position_cov, stamp,
-                            self._frame(key))
-        self.pose_pub.publish(pose)
-        if reasons:
-            self._send_initial(pose, reasons, key,
-                               f'sigma {place.position_sigma:.1f} m')
-
-    def _send_initial(self, pose, reasons, place, how):
-        """Publish ``pose`` on initialpose; log why, where and ``how``."""
-        self.initial_pose_pub.publish(pose)
-        p = pose.pose.pose.position
+    def _send_initial(self, msg, pose):
+        """Publish ``msg`` on initialpose; log why, where and how."""
+        self.initial_pose_pub.publish(msg)
+        p = msg.pose.pose.position
+        how = (f'fused with odometry, {yaw_text(msg)}' if pose.fused else
+               f'sigma {math.sqrt(pose.cov.trace() / 2):.1f} m')
         self.get_logger().info(
-            f'initialpose sent ({"; ".join(reasons)}): building {place[0]}, '
-            f'floor {place[1]}, x {p.x:.2f}, y {p.y:.2f} in '
-            f'{pose.header.frame_id} ({how})')
-
-    def _reject(self, status, reason, detail, stamp):
-        self.counts['rejected'] += 1
-        self.counts[f'rejected/{reason}'] += 1
-        status.level = DiagnosticStatus.ERROR
-        status.message = f'scan rejected: {detail}'
-        status.values = [_kv('reason', reason)]
-        self._publish_answer(status, stamp)
-        self.get_logger().warn(f'scan rejected: {detail}',
-                               throttle_duration_sec=THROTTLE_S)
+            f'initialpose sent ({"; ".join(pose.initial)}): building '
+            f'{pose.place[0]}, floor {pose.place[1]}, x {p.x:.2f}, y '
+            f'{p.y:.2f} in {msg.header.frame_id} ({how})')
 
     # health ---------------------------------------------------------------
     def _publish_health(self):
-        counts = self.counts
-        provenance = self.recognizer.model.provenance
+        counts = self.pipeline.counts
+        provenance = self.pipeline.recognizer.model.provenance
         selection = provenance.get('selection', {})
         rss, peak = _memory_mib()
         values = [_kv(f'scans_{k}', counts.get(k, 0)) for k in
@@ -361,7 +276,7 @@ class ClassifierNode(Node):
         values += [_kv(f'rejected/{r}', counts.get(f'rejected/{r}', 0))
                    for r in REJECT_REASONS + ('internal_error',)]
         values += [
-            _kv('last_latency_ms', f'{self.last_latency_ms:.3f}'),
+            _kv('last_latency_ms', f'{self.pipeline.last_latency_ms:.3f}'),
             _kv('rss_mib', f'{rss:.1f}'),
             _kv('peak_rss_mib', f'{peak:.1f}'),
             _kv('model_path', self.model_path),
@@ -375,11 +290,12 @@ class ClassifierNode(Node):
         message = (f'{counts["answered"]} scans answered, '
                    f'{counts["rejected"]} rejected, '
                    f'{counts["dropped"]} dropped')
-        if self.odometry is not None:
-            problem, fusion_counts = self.odometry.health()
+        fusion = self.pipeline.fusion
+        if fusion is not None:
+            problem, fusion_counts = fusion.health(time.monotonic())
             values += [_kv(k, v) for k, v in fusion_counts.items()]
-            values.append(_kv('fusion', 'on' if self.odometry.active else
-                              'off' if not self.odometry.enabled else
+            values.append(_kv('fusion', 'on' if fusion.active else
+                              'off' if not fusion.enabled else
                               'waiting for odometry'))
             if problem:
                 level = DiagnosticStatus.WARN

@@ -17,8 +17,10 @@ import math
 
 import numpy as np
 
-from .fusion import Fusion, relative
+from ..pipeline.scan_pipeline import position_answer, ScanPipeline
 from .angles import wrap
+from .fusion import Fusion, relative
+from .particles import UNKNOWN_VARIANCE
 
 #: Chi-square (2 dof) of the 95 % ellipse.
 CHI2_95 = -2 * math.log(0.05)
@@ -26,36 +28,53 @@ CHI2_95 = -2 * math.log(0.05)
 
 def fuse_offline(odometry, scans, fusion=None):
     """
-    Return the fused pose at every scan: (xy (n, 2), yaw (n,), cov (n, 3, 3)).
+    Return the node's pose at every scan: (xy (n, 2), yaw (n,), cov (n, 3, 3)).
 
     ``odometry``: (m, 4) rows of stamp, x, y, yaw; ``scans``: stamps (n,),
-    xy (n, 2) and optionally each scan's sigma (n,), in stamp order, as the node would receive
-    them (a scan is taken after odometry of the same stamp). Scans with no
-    odometry at all are applied alone. NaN where a scan gave no pose.
+    xy (n, 2), optionally each scan's sigma (n,) and coverage (n,), in
+    stamp order. They go through the node's
+    :class:`.scan_pipeline.ScanPipeline` (each scan a confident answer of
+    one place, :func:`.scan_pipeline.position_answer`) as the node would
+    receive them, on the stamps' clock: each message arrives at its stamp
+    (a scan after odometry of the same stamp), and the node's timer ticks
+    after each odometry pose and once at the end (the scans still waiting
+    go through alone). A scan before any odometry gets its own position
+    (yaw NaN, its variance unknown); NaN where a scan gave no pose.
     """
-    fusion = fusion or Fusion()
+    pipeline = ScanPipeline(fusion=fusion or Fusion())
+    pipeline.configure(pose_rate=0)     # the poses at scans only
     stamps, xy = scans[:2]
-    sigma = scans[2] if len(scans) > 2 else [None] * len(stamps)
+    sigma = scans[2] if len(scans) > 2 else np.full(len(stamps), np.nan)
+    coverage = scans[3] if len(scans) > 3 else [None] * len(stamps)
     n = len(stamps)
     out_xy, out_yaw = np.full((n, 2), np.nan), np.full(n, np.nan)
     out_cov = np.full((n, 3, 3), np.nan)
-    index = {float(s): i for i, s in enumerate(stamps)}
 
-    def keep(poses):
-        for p in poses:
-            i = index[p.stamp]
-            out_xy[i], out_yaw[i], out_cov[i] = p.xy, p.yaw, p.cov
+    def keep(out):
+        for p in out.poses:
+            if p.source is None:    # between scans
+                continue
+            out_xy[p.source] = p.xy
+            if p.fused:
+                out_yaw[p.source], out_cov[p.source] = p.yaw, p.cov
+            else:
+                out_cov[p.source] = np.diag([0.0, 0.0, UNKNOWN_VARIANCE])
+                out_cov[p.source, :2, :2] = p.cov
+
+    def arrive(row):
+        keep(pipeline.odometry(*row, now=row[0]))
+        keep(pipeline.tick(row[0]))
     o = 0
     for i in range(n):
         while o < len(odometry) and odometry[o, 0] <= stamps[i]:
-            keep(fusion.odometry(*odometry[o])[1])
-            keep(fusion.expire(odometry[o, 0]))
+            arrive(odometry[o])
             o += 1
-        if np.isfinite(xy[i]).all():
-            keep(fusion.scan(stamps[i], xy[i], (0, 0), sigma=sigma[i]))
+        keep(pipeline.answer(position_answer(xy[i], sigma[i],
+                                             coverage=coverage[i]),
+                             stamps[i], stamps[i], i))
     for row in odometry[o:]:
-        keep(fusion.odometry(*row)[1])
-    keep(fusion.expire(math.inf))
+        arrive(row)
+    keep(pipeline.tick(math.inf))
     return out_xy, out_yaw, out_cov
 
 
