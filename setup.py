@@ -13,6 +13,7 @@ console_scripts = [
     'fit_tracking = wifi_place_recognition.cli.fit_tracking:main',
     'fit_odometry = wifi_place_recognition.cli.fit_odometry:main',
     'replay_run = wifi_place_recognition.cli.replay_run:main',
+    'survey_gaps = wifi_place_recognition.cli.survey_gaps:main',
     'wifi_scanner_node = '
     'wifi_place_recognition.ros.executables:wifi_scanner_node',
     'record_fingerprints = '
