@@ -15,7 +15,11 @@ third of the training run's scans cut out, in pieces of 15-25 m driven
 (every third piece, seeded; :func:`survey_holes`), so the test run also
 drives where the survey has no scan (besides what the training run never
 visited). Test scans farther than 3 m from every kept training scan are
-"in a hole": single and fused errors are also given there. Also: a
+"in a hole": single and fused errors are also given there, and how
+well the model's coverage probability tells them (ROC AUC, reliability);
+the filter weighing scans by it (``coverage_full`` 0.5, fitted) and,
+as an upper bound, told which scans lie in holes (coverage 0 there, 1
+elsewhere) are scored beside the default. Also: a
 kidnapped robot (two runs spliced, the odometry continuous, the true
 position jumping) and the recovery time (the error below 2 m for 10 s
 in a row), per survey.
@@ -162,8 +166,27 @@ def models(train, folder, holes=False):
 
 
 def single_scans(model, run):
-    """Return the model's single-scan (positions, sigmas) of the run."""
-    return model.predict_positions(align(model, run.fp))[1:]
+    """Return a model's single-scan (positions, sigmas, coverage) of a run."""
+    return model.predict_positions(align(model, run.fp), coverage=True)[1:]
+
+
+def detector_figures(coverage, hole, ok):
+    """
+    Return how the coverage probability tells the scans in holes.
+
+    ROC AUC (covered scans against those in holes) and the reliability
+    bins against the truth, over the test scans with a position.
+    """
+    from wifi_place_recognition.training.coverage import auc, reliability
+    use = ok & np.isfinite(coverage)
+    if not use.any():
+        return {'auc': None, 'note': 'the model has no coverage model'}
+    table, ece = reliability(coverage[use], ~hole[use])
+    return {'auc': auc(coverage[use], ~hole[use]), 'ece': ece,
+            'mean_in_holes': float(np.mean(coverage[use & hole])) if
+            (use & hole).any() else None,
+            'mean_covered': float(np.mean(coverage[use & ~hole])),
+            'reliability': table}
 
 
 def localise(params, odometry, stamps, single, seed):
@@ -180,7 +203,7 @@ def in_holes(test, kept):
 
 def single_figures(test, single, hole):
     """Return the single-scan figures: errors, in holes, 95 % circle."""
-    xy, sigma = single
+    xy, sigma = single[:2]
     out = score(test.stamps, test.xy, xy)
     error = np.linalg.norm(xy - test.xy, axis=1)
     ok = np.isfinite(error)
@@ -214,13 +237,21 @@ def pair(trained, test):
     hole = in_holes(test, trained[2])
     odo_xy, odo_yaw = odometry_alone(test.odometry, test.stamps, test.xy,
                                      test.yaw)
+    ok = np.isfinite(test.xy).all(axis=1)
     out = {'single': single_figures(test, single, hole),
+           'coverage_detector': detector_figures(single[2], hole, ok),
            'odometry': score(test.stamps, test.xy, odo_xy, test.yaw,
                              odo_yaw),
            'drift_fitted_deg_per_m': math.degrees(fitted.fusion.drift_mean)}
-    for name, params in (('fused_fitted', fitted.fusion),
-                         ('fused_default', FusionParams())):
-        out[name], xy = fused_figures(test, single, params, hole)
+    told = (single[0], single[1], np.where(hole, 0.0, 1.0))
+    for name, params, given in (
+            ('fused_fitted', fitted.fusion, single),
+            ('fused_default', FusionParams(), single),
+            ('fused_coverage', replace(fitted.fusion, coverage_full=0.5),
+             single),
+            ('fused_told_holes', replace(fitted.fusion, coverage_full=0.5),
+             told)):
+        out[name], xy = fused_figures(test, given, params, hole)
         for s in out[name]:
             s['ratio'] = s['mean_m'] / out['single']['mean_m']
         if name == 'fused_fitted':
@@ -313,6 +344,18 @@ HEADER = (f'{"test <- train":22s} {"survey":6s} {"single":>6s} '
           f'{"p95":>5s} {"max60":>5s} {"yaw":>4s} {"ellip":>5s} '
           f'{"hole s/f":>10s} {"circle":>6s} | no fit: {"ratio":>5s} '
           f'{"worst":>5s} {"ellip":>5s}')
+
+
+def coverage_line(name, survey, figures):
+    """Return a row: the detector, and the filter weighing by it or told."""
+    def mean(runs):
+        return float(np.mean([r['ratio'] for r in runs]))
+    d = figures['coverage_detector']
+    a = 'n/a' if d.get('auc') is None else f'{d["auc"]:.2f}'
+    return (f'{name:22s} {survey:6s} detector AUC {a:>4s} | ratio: '
+            f'default {mean(figures["fused_fitted"]):.2f}, weighed '
+            f'{mean(figures["fused_coverage"]):.2f}, told the holes '
+            f'{mean(figures["fused_told_holes"]):.2f}')
 
 
 def summary_line(name, survey, figures):
@@ -429,6 +472,8 @@ def main():
                         del figures['trajectory']
                     print(summary_line(name, 'holes' if holes else 'full',
                                        figures), flush=True)
+                    print(coverage_line(name, 'holes' if holes else 'full',
+                                        figures), flush=True)
                 for a, b in permutations(runs, 2):
                     # a third run's model; with two runs, a's (b is unseen)
                     train = ([r for r in runs if r not in (a, b)] or [a])[0]

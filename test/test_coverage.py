@@ -1,7 +1,4 @@
-"""
-The coverage model: learned from the survey alone, kept in the model file,
-read by the filter (no ROS).
-"""
+"""The coverage model: learned from the survey, kept, read by the filter."""
 
 from pathlib import Path
 
