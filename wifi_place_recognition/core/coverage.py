@@ -8,7 +8,8 @@ positions scatter, and the scan hears APs the references never heard.
 :func:`features` reads them from one scan's distances to the references;
 :class:`CoverageModel` (a logistic regression on them) turns them into the
 probability that the scan lies within a few metres of a survey scan.
-Training fits it on the survey alone (:mod:`..training.coverage`): the
+Training fits it on the survey alone
+(:mod:`wifi_place_recognition.training.coverage`): the
 cross-validation folds hold out stretches of the survey, and each held-out
 scan is labelled covered when a kept scan lies near it. Numpy only.
 """

@@ -4,8 +4,9 @@ Where to survey next: the stretches of a run the survey does not cover.
 A run's scans in time order, each judged covered or not: from its true
 position (a kept survey scan of its building/floor within ``covered_m``)
 when the run has positions, else from the model's coverage probability
-(:mod:`.coverage`). :func:`gaps` groups the scans off the survey into
-stretches (start, end, length driven), the list a user surveys next.
+(:mod:`wifi_place_recognition.core.coverage`). :func:`gaps` groups the
+scans off the survey into stretches (start, end, length driven), the
+list a user surveys next.
 """
 
 from dataclasses import dataclass

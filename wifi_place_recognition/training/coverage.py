@@ -4,10 +4,10 @@ Fit the coverage model on the survey alone: its folds' held-out stretches.
 Each fold of the position cross-validation holds out stretches of the
 survey and places them among the scans it keeps: a held-out scan is
 covered when a kept scan of its class lies within ``COVERED_M``, and its
-:data:`..core.coverage.FEATURES` are what the answer shows. A logistic
-regression (scikit-learn) on them is the model; fitted on every fold but
-one and scored on that one, it reports how well it separates (ROC AUC)
-and whether its probability means what it says (reliability bins).
+``FEATURES`` (:mod:`wifi_place_recognition.core.coverage`) are what the
+answer shows. A logistic regression (scikit-learn) on them is the
+model; fitted on every fold but one and scored on that one, it reports
+how well it separates (ROC AUC) and whether its probability means what it says (reliability bins).
 """
 
 import numpy as np

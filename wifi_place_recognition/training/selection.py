@@ -251,7 +251,8 @@ def _coverage_examples(splits, predicted, n_classes, space, k, sigma):
     Return (features, covered, fold) of every held-out scan, as placed.
 
     Among the kept scans of each fold, in the chosen space, with the
-    calibrated sigma (:func:`..core.coverage.features`).
+    calibrated sigma (``features`` of
+    :mod:`wifi_place_recognition.core.coverage`).
     """
     rep, metric, scope = space
     x, covered, fold = [], [], []
