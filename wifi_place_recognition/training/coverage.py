@@ -7,7 +7,8 @@ covered when a kept scan of its class lies within ``COVERED_M``, and its
 ``FEATURES`` (:mod:`wifi_place_recognition.core.coverage`) are what the
 answer shows. A logistic regression (scikit-learn) on them is the
 model; fitted on every fold but one and scored on that one, it reports
-how well it separates (ROC AUC) and whether its probability means what it says (reliability bins).
+how well it separates (ROC AUC) and whether its probability means what
+it says (reliability bins).
 """
 
 import numpy as np
