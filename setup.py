@@ -87,7 +87,7 @@ setup(
     # runs the benchmark baselines, matplotlib draws evaluate_model --plot;
     # requirements.txt is the development set.
     extras_require={
-        'train': ['torch'],
+        'train': ['torch', 'scikit-learn'],
         'bench': ['torch', 'scikit-learn'],
         'plot': ['matplotlib', 'scikit-learn'],
         'test': ['pytest', 'flake8', 'pydocstyle', 'torch', 'matplotlib',

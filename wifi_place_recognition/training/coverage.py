@@ -42,12 +42,13 @@ def _model(params, report=None):
 
 def auc(score, label):
     """Return the ROC AUC of ``score`` for boolean ``label`` (ties: half)."""
-    from scipy.stats import rankdata
-    label = np.asarray(label, bool)
+    score, label = np.asarray(score, np.float64), np.asarray(label, bool)
     n1, n0 = int(label.sum()), int((~label).sum())
     if not n1 or not n0:
         return float('nan')
-    ranks = rankdata(score)
+    _, where, counts = np.unique(score, return_inverse=True,
+                                 return_counts=True)
+    ranks = (np.cumsum(counts) - (counts - 1) / 2)[where.reshape(-1)]
     return float((ranks[label].sum() - n1 * (n1 + 1) / 2) / (n1 * n0))
 
 
