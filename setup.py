@@ -14,6 +14,7 @@ console_scripts = [
     'fit_odometry = wifi_place_recognition.cli.fit_odometry:main',
     'replay_run = wifi_place_recognition.cli.replay_run:main',
     'survey_gaps = wifi_place_recognition.cli.survey_gaps:main',
+    'bag_to_csv = wifi_place_recognition.cli.bag_to_csv:main',
     'wifi_scanner_node = '
     'wifi_place_recognition.ros.executables:wifi_scanner_node',
     'record_fingerprints = '
@@ -84,14 +85,16 @@ setup(
     python_requires='>=3.10',
     install_requires=['setuptools', 'numpy'],
     # The node needs numpy only; torch trains (train_model), scikit-learn
-    # runs the benchmark baselines, matplotlib draws evaluate_model --plot;
+    # runs the benchmark baselines, matplotlib draws evaluate_model --plot,
+    # rosbags reads bags in place of CSVs (no ROS install needed);
     # requirements.txt is the development set.
     extras_require={
+        'bags': ['rosbags>=0.11'],
         'train': ['torch', 'scikit-learn'],
         'bench': ['torch', 'scikit-learn'],
         'plot': ['matplotlib', 'scikit-learn'],
         'test': ['pytest', 'flake8', 'pydocstyle', 'torch', 'matplotlib',
-                 'scikit-learn'],
+                 'scikit-learn', 'rosbags>=0.11'],
     },
     zip_safe=True,
     maintainer='wifi_place_recognition developers',

@@ -8,9 +8,11 @@ from pathlib import Path
 
 from ..core.artifact import ModelFileError
 from ..core.atomic import probe_folder
+from ..data.bags import BagOptions, is_bag, read_bags
 from ..data.files import DataError, download_uci
 from ..data.fingerprints import (read_fingerprints, ReaderOptions,
                                  SMALL_CLASS_POLICIES)
+from ..data.poses import read_poses
 
 DEFAULT_CACHE = Path(os.environ.get('XDG_CACHE_HOME', Path.home() / '.cache')
                      ) / 'wifi_place_recognition'
@@ -99,6 +101,7 @@ def add_data_arguments(parser, training=False):
                         'cells at the bottom of the range is taken too, '
                         'with a note); --not-detected is what the model '
                         'uses instead')
+    add_bag_arguments(parser)
     if training:
         g.add_argument('--small-classes', choices=SMALL_CLASS_POLICIES,
                        default='warn',
@@ -107,18 +110,52 @@ def add_data_arguments(parser, training=False):
                             'them, or keep them as intended')
 
 
+def add_bag_arguments(parser):
+    """Add the options that say how to read bags (topics, labels)."""
+    d = BagOptions()
+    g = parser.add_argument_group(
+        'reading bags (a rosbag2 folder, .mcap or .db3 file, or a ROS 1 '
+        '.bag, in place of CSVs; see doc/your-building.md, "Bags in")')
+    g.add_argument('--bag-scan-topic', default=d.scan_topic, metavar='TOPIC',
+                   help='sensor_msgs/msg/JointState scans (default: '
+                        '%(default)s)')
+    g.add_argument('--bag-odom-topic', default=d.odometry_topic,
+                   metavar='TOPIC',
+                   help='nav_msgs/msg/Odometry (default: %(default)s)')
+    g.add_argument('--bag-pose-topic', default=d.pose_topic, metavar='TOPIC',
+                   help='the localiser\'s geometry_msgs/msg/'
+                        'PoseWithCovarianceStamped, interpolated to each '
+                        'scan as its position (default: %(default)s; '
+                        'none: no positions)')
+    g.add_argument('--bag-building', type=int, default=d.building,
+                   metavar='N',
+                   help='building of every scan of a bag (default: '
+                        '%(default)s)')
+    g.add_argument('--bag-floor', type=int, default=d.floor, metavar='N',
+                   help='floor of every scan of a bag (default: '
+                        '%(default)s)')
+
+
+def bag_options(args):
+    """Return the :class:`.BagOptions` of :func:`add_bag_arguments`."""
+    return BagOptions(args.bag_scan_topic, _column(args.bag_odom_topic) or '',
+                      _column(args.bag_pose_topic) or '', args.bag_building,
+                      args.bag_floor)
+
+
 @dataclass(frozen=True)
 class DataOptions:
     """
     What the command line says about the data: how to read it, where from.
 
     ``download``: with no path given, read the UCI zip, fetched once into
-    ``cache_dir``.
+    ``cache_dir``; ``bag``: how to read bags.
     """
 
     reader: ReaderOptions = field(default_factory=ReaderOptions)
     download: bool = False
     cache_dir: Path = DEFAULT_CACHE
+    bag: BagOptions = field(default_factory=BagOptions)
 
 
 def data_options(args):
@@ -137,7 +174,7 @@ def data_options(args):
             position_columns=args.position_columns,
             not_detected_marker=args.not_detected_marker),
         getattr(args, 'download', False),
-        getattr(args, 'cache_dir', DEFAULT_CACHE))
+        getattr(args, 'cache_dir', DEFAULT_CACHE), bag_options(args))
 
 
 def read_data(given, options, what, role='train', small_classes=None):
@@ -147,8 +184,26 @@ def read_data(given, options, what, role='train', small_classes=None):
     ``given``: the paths (or None: the downloaded zip, with
     ``options.download``); ``options``: :class:`DataOptions`;
     ``small_classes``: the policy of :class:`ReaderOptions`. Notes (columns
-    left out, a detected marker ...) go to stderr always.
+    left out, a detected marker ...) go to stderr always. Bags (all the
+    paths, or none) are read by :func:`.bags.read_bags`.
     """
+    return read_run(given, options, what, role, small_classes)[0]
+
+
+def read_run(given, options, what, role='train', small_classes=None):
+    """
+    Return (fingerprints, odometry, poses) as :func:`read_data` reads them.
+
+    Odometry and poses (float64 rows: stamp, x, y, yaw, ...) come from
+    bags; None from CSVs, or a bag without the topic.
+    """
+    bags = [is_bag(p) for p in given or ()]
+    if any(bags):
+        if not all(bags):
+            raise DataError(f'{what}: give bags or CSVs, not both')
+        fp, odometry, poses = read_bags(given, options.bag)
+        _print_notes(fp)
+        return fp, odometry, poses
     if not given:
         if not options.download:
             raise DataError(f'no {what} given: pass a CSV path, a folder or '
@@ -156,9 +211,37 @@ def read_data(given, options, what, role='train', small_classes=None):
         given = [download_uci(options.cache_dir)]
     reader = replace(options.reader, small_classes=small_classes)
     fp = read_fingerprints(given, role, reader)
+    _print_notes(fp)
+    return fp, None, None
+
+
+def _print_notes(fp):
     for note in fp.notes:
         print(f'note: {note}', file=sys.stderr, flush=True)
-    return fp
+
+
+def read_pose_input(path, kind, options, from_run=None):
+    """
+    Return the float64 (n, 4) poses of ``--odometry`` or ``--truth``.
+
+    ``kind``: ``'odometry'`` or ``'poses'``; ``path``: a pose CSV, a bag
+    (its topic of ``kind``), or None for ``from_run`` (those of the run's
+    bags, as :func:`read_run` returns them). Raise :class:`DataError` when
+    there are none.
+    """
+    option = '--odometry' if kind == 'odometry' else '--truth'
+    if path is None:
+        if from_run is None:
+            raise DataError(f'no {option} given (the run is not a bag with '
+                            f'a {kind} topic)')
+        return from_run[:, :4]
+    if not is_bag(path):
+        return read_poses(path)
+    _, odometry, poses = read_bags([path], options.bag)
+    found = odometry if kind == 'odometry' else poses
+    if found is None:
+        raise DataError(f'{option} {path}: the bag has no {kind} topic')
+    return found[:, :4]
 
 
 def same_file(a, b):

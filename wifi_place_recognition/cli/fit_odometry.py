@@ -10,10 +10,9 @@ from ..core.artifact import load_model, save_model
 from ..core.atomic import atomic_write
 from ..core.filter.odometry_fit import fit_odometry
 from ..core.filter.particles import FusionParams
-from ..data.poses import read_poses
 from .common import (add_data_arguments, add_model_arguments,
                      check_outputs, data_options, main_wrapper,
-                     model_output, read_data)
+                     model_output, read_pose_input, read_run)
 
 
 @main_wrapper
@@ -31,9 +30,11 @@ def main(argv=None):
     add_model_arguments(p, 'fusion')
     p.add_argument('--data', nargs='+', required=True, metavar='PATH',
                    help='the run\'s scans: CSV with TIMESTAMP, X, Y, YAW '
-                        '(the survey the model was trained on will do)')
-    p.add_argument('--odometry', type=Path, required=True, metavar='CSV',
-                   help='the run\'s odometry: TIMESTAMP, X, Y, YAW')
+                        '(the survey the model was trained on will do), '
+                        'or its bag(s) with scans, odometry and poses')
+    p.add_argument('--odometry', type=Path, metavar='CSV',
+                   help='the run\'s odometry: TIMESTAMP, X, Y, YAW, or a '
+                        'bag (default: that of the --data bags)')
     p.add_argument('--window', type=float, default=3.0, metavar='M',
                    help='metres of travel per stretch (default: '
                         '%(default)s)')
@@ -51,18 +52,21 @@ def main(argv=None):
     if model.position is None:
         raise ValueError(f'{args.model}: the model has no position output; '
                          f'fusion needs one (train with X, Y)')
-    fp = read_data(args.data, data_options(args), 'run')
+    options = data_options(args)
+    fp, run_odometry, _ = read_run(args.data, options, 'run')
     if fp.position is None or 'YAW' not in fp.meta or \
             'TIMESTAMP' not in fp.meta:
         raise ValueError(f'{fp.source}: fitting needs TIMESTAMP, X, Y and '
                          f'YAW columns (the localiser\'s pose at each scan)')
-    odometry = read_poses(args.odometry)
+    odometry = read_pose_input(args.odometry, 'odometry', options,
+                               run_odometry)
+    odometry_source = str(args.odometry or fp.source)
     params, report = fit_odometry(
         odometry, fp.meta['TIMESTAMP'], fp.position,
         fp.meta['YAW'], model.fusion or FusionParams(),
-        args.window, (fp.source, str(args.odometry)))
+        args.window, (fp.source, odometry_source))
     report.update(run=fp.source, run_sha256=fp.sha256,
-                  odometry=str(args.odometry),
+                  odometry=odometry_source,
                   created=time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()))
     params.fit.update(report)
     model.fusion = params

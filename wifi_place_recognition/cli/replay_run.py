@@ -12,11 +12,10 @@ from rclpy.executors import ExternalShutdownException
 from ..core.atomic import atomic_write
 from ..core.filter.trajectory import (inside_span, odometry_alone, score,
                                       time_span, truth_at)
-from ..data.poses import read_poses
 from ..ros.run_replayer import (arrays, check_spans, ODOMETRY_MARGIN_S,
                                 replay_run, RunReplayOptions)
 from .common import (add_data_arguments, check_outputs, data_options,
-                     main_wrapper, read_data)
+                     main_wrapper, read_pose_input, read_run)
 
 #: What each column of the printed table is.
 WHO = (('single', 'each scan alone'),
@@ -43,12 +42,15 @@ def main(argv=None):
                     'side.')
     p.add_argument('--data', nargs='+', required=True, metavar='PATH',
                    help='the run\'s scans: a CSV with TIMESTAMP (and X, Y, '
-                        'YAW as truth unless --truth is given)')
-    p.add_argument('--odometry', type=Path, required=True, metavar='CSV',
-                   help='the run\'s odometry: TIMESTAMP, X, Y, YAW')
+                        'YAW as truth unless --truth is given), or its '
+                        'bag(s): scans, odometry, and poses as truth')
+    p.add_argument('--odometry', type=Path, metavar='CSV',
+                   help='the run\'s odometry: TIMESTAMP, X, Y, YAW, or a '
+                        'bag (default: that of the --data bags)')
     p.add_argument('--truth', type=Path, metavar='CSV',
-                   help='true poses (TIMESTAMP, X, Y, YAW), interpolated '
-                        'to the scans (default: the scans\' X, Y, YAW)')
+                   help='true poses (TIMESTAMP, X, Y, YAW) or a bag\'s, '
+                        'interpolated to the scans (default: the scans\' '
+                        'X, Y, YAW)')
     p.add_argument('--speed', type=float, default=10.0,
                    help='times the recorded pace (default: %(default)s)')
     p.add_argument('--wait', type=float, default=15.0,
@@ -70,20 +72,22 @@ def main(argv=None):
     check_outputs([('--json', args.json), ('--trajectory', args.trajectory)],
                   [('--data', d) for d in args.data] +
                   [('--odometry', args.odometry), ('--truth', args.truth)])
-    fp = read_data(args.data, data_options(args), 'run', role='test')
+    data = data_options(args)
+    fp, run_odometry, _ = read_run(args.data, data, 'run', role='test')
     if 'TIMESTAMP' not in fp.meta:
         p.error(f'{fp.source} has no TIMESTAMP column')
-    odometry = read_poses(args.odometry)
-    truth = truth_at(read_poses(args.truth), fp.meta['TIMESTAMP']) \
-        if args.truth else _own_truth(fp)
+    odometry = read_pose_input(args.odometry, 'odometry', data, run_odometry)
+    odometry_source = args.odometry or fp.source
+    truth = truth_at(read_pose_input(args.truth, 'poses', data),
+                     fp.meta['TIMESTAMP']) if args.truth else _own_truth(fp)
     if not np.isfinite(truth[0]).all(axis=1).any():
         raise ValueError(f'{args.truth or fp.source}: no true pose within '
                          f'the time span of the scans of {fp.source}')
     send = check_spans(fp.meta['TIMESTAMP'], odometry[:, 0], options.speed,
-                       (fp.source, args.odometry))
+                       (fp.source, odometry_source))
     sent = int(send.sum())
     if sent < len(send):
-        print(f'note: {args.odometry}: sending {sent} of {len(send)} '
+        print(f'note: {odometry_source}: sending {sent} of {len(send)} '
               f'odometry poses, {len(send) - sent} left out (more than '
               f'{ODOMETRY_MARGIN_S:g} s outside the scans\' time span '
               f'{time_span(fp.meta["TIMESTAMP"])})', file=sys.stderr,
@@ -107,7 +111,7 @@ def main(argv=None):
     answered = sum(status is not None for status, _ in results.values())
     print(f'{fp.source}: {answered}/{len(fp)} scans answered, '
           f'{sum(pose is not None for _, pose in results.values())} with a '
-          f'pose; odometry {args.odometry}: {sent} of {len(send)} poses '
+          f'pose; odometry {odometry_source}: {sent} of {len(send)} poses '
           f'sent')
     n = scores['scans']
     print(f'scored {n["with_true_pose"]} of {n["total"]} scans '

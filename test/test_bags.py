@@ -1,0 +1,165 @@
+"""
+Bags in: a shared robot run written as real bags (MCAP, SQLite3) and read.
+
+The bags are written with the rosbags writer from b24test3's CSVs (scans
+on wifi/scan, odometry on odom, AMCL on amcl_pose); read back, they give
+the run's scans, odometry and poses, labels by the documented rule (equal
+to the CSV's, whose rule it is), the same odometry drift, and the same
+CSVs from bag_to_csv. Bad bags are refused in one line, nothing written.
+"""
+
+import json
+import shutil
+
+from bag_helpers import RUN, run_messages, scan_message, write_bag
+from conftest import python_module, run
+import numpy as np
+import pytest
+from wifi_place_recognition.data.bags import BagOptions, read_bags
+from wifi_place_recognition.data.fingerprints import read_fingerprints
+from wifi_place_recognition.data.poses import read_poses
+
+pytestmark = pytest.mark.skipif(not RUN.exists(),
+                                reason='robot runs not available')
+
+
+@pytest.fixture(scope='module')
+def bags(tmp_path_factory):
+    """Return {storage: bag folder} of the whole run b24test3."""
+    folder = tmp_path_factory.mktemp('bags')
+    messages = run_messages()
+    return {s: write_bag(folder / s, messages, s)
+            for s in ('mcap', 'sqlite3')}
+
+
+def _same_scans(fp, csv):
+    """Assert the scans of ``fp`` are those of the CSV's ``csv``."""
+    assert len(fp) == len(csv)
+    assert np.array_equal(fp.meta['TIMESTAMP'].round(6),
+                          csv.meta['TIMESTAMP'].round(6))
+    index = {ap: j for j, ap in enumerate(csv.ap_ids)}
+    heard = [index[ap] for ap in fp.ap_ids]
+    assert np.array_equal(fp.rssi, csv.rssi[:, heard], equal_nan=True)
+    others = np.setdiff1d(np.arange(len(csv.ap_ids)), heard)
+    assert np.isnan(csv.rssi[:, others]).all()
+
+
+@pytest.mark.parametrize('storage,as_file', [('mcap', False),
+                                             ('mcap', True),
+                                             ('sqlite3', False)])
+def test_a_bag_reads_back_as_the_run_s_csvs(bags, storage, as_file):
+    path = bags[storage]
+    if as_file:
+        path = next(path.glob('*.mcap'))
+    fp, odometry, poses = read_bags([path])
+    csv = read_fingerprints(RUN / 'scans.csv')
+    _same_scans(fp, csv)
+    # labels by the rule: between the two AMCL poses around each stamp,
+    # as the CSV's X, Y, YAW (written with 6 decimals)
+    assert np.abs(fp.position - csv.position).max() < 2e-6
+    assert np.abs(fp.meta['YAW'] - csv.meta['YAW']).max() < 2e-6
+    assert np.abs(odometry - read_poses(RUN / 'odom.csv')).max() < 2e-6
+    assert np.abs(poses[:, :4] - read_poses(RUN / 'poses.csv')).max() < 2e-6
+    assert fp.building.tolist() == fp.floor.tolist() == [0] * len(fp)
+
+
+def test_topics_with_or_without_slash_labels_and_no_poses(bags):
+    fp = read_bags([bags['mcap']], BagOptions('/wifi/scan', '/odom', '',
+                                              building=2, floor=3))[0]
+    assert fp.position is None and 'YAW' not in fp.meta
+    assert len(fp) == 689    # every scan: none left out for want of a pose
+    assert set(fp.building) == {2} and set(fp.floor) == {3}
+
+
+def test_bag_to_csv_writes_the_run_s_csvs(bags, tmp_path):
+    out = tmp_path / 'b24test3'
+    result = run(python_module('cli.bag_to_csv', bags['sqlite3'], '-o', out))
+    assert result.returncode == 0, result.stderr
+    for name in ('odom.csv', 'poses.csv'):
+        assert (out / name).read_bytes() == (RUN / name).read_bytes()
+    csv = read_fingerprints(RUN / 'scans.csv')
+    exported = read_fingerprints(out / 'scans.csv')
+    _same_scans(exported, csv)
+    assert np.abs(exported.position - csv.position).max() < 2e-6
+    # the scans outside the poses' time span are kept, without X, Y, YAW
+    lines = (out / 'scans.csv').read_text().splitlines()
+    assert len(lines) - 1 == len((RUN / 'scans.csv').read_text()
+                                 .splitlines()) - 1 == 689
+
+
+def test_fit_odometry_gives_the_same_drift_from_the_bag(bags, tmp_path,
+                                                        surveyed_model):
+    drift = []
+    for data in (['--data', RUN / 'scans.csv', '--odometry',
+                  RUN / 'odom.csv'], ['--data', bags['mcap']]):
+        report = tmp_path / f'{len(drift)}.json'
+        result = run(python_module('cli.fit_odometry', '--model',
+                                   surveyed_model, *data, '-o',
+                                   tmp_path / 'fitted.npz', '--report',
+                                   report))
+        assert result.returncode == 0, result.stderr
+        drift.append(json.loads(report.read_text()))
+    assert drift[1]['drift_deg_per_m'] == pytest.approx(
+        drift[0]['drift_deg_per_m'], abs=1e-6)
+    assert drift[1]['scans'] == drift[0]['scans']
+    assert drift[1]['windows'] == drift[0]['windows']
+
+
+def _refused(args, tmp_path, message):
+    """Run bag_to_csv and train_model: exit 2, one line, nothing written."""
+    out = tmp_path / 'out'
+    for argv in (python_module('cli.bag_to_csv', *args, '-o', out),
+                 python_module('cli.train_model', '--data', *args, '-o',
+                               tmp_path / 'm.npz')):
+        result = run(argv)
+        assert result.returncode == 2, result.stderr
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith('error: '), lines
+        assert message in lines[0], lines[0]
+        assert not list(tmp_path.glob('out/*')) and \
+            not (tmp_path / 'm.npz').exists()
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_a_truncated_bag_is_refused_in_one_line(bags, tmp_path, storage):
+    bag = shutil.copytree(bags[storage], tmp_path / 'cut')
+    data = next(f for f in bag.iterdir() if f.name != 'metadata.yaml')
+    data.write_bytes(data.read_bytes()[:data.stat().st_size // 2])
+    _refused([bag], tmp_path, 'truncated or corrupt')
+
+
+def _bag(tmp_path, messages, storage='mcap'):
+    return write_bag(tmp_path / 'bag', messages, storage)
+
+
+def test_bad_bags_are_refused_in_one_line(tmp_path):
+    first = run_messages(seconds=30)
+    scans = [m for m in first if m[0] == '/wifi/scan']
+    odometry = [m for m in first if m[0] == '/odom']
+    other = [('/wifi/scan', 'nav_msgs/msg/Odometry') + m[2:]
+             for m in odometry]
+    # recorded after the fifth scan, stamped a second before the first
+    early = scan_message(scans[0][2].header.stamp.sec - 1,
+                         ['aa:bb:cc:dd:ee:ff'], [-60.0])[0]
+    backwards = scans[:5] + [('/wifi/scan', scans[0][1], early,
+                              scans[4][3] + 1)]
+    for name, messages, message in (
+            ('wrong type', other, 'topic /wifi/scan is nav_msgs/msg/'
+                                  'Odometry, not sensor_msgs/msg/JointState'),
+            ('no scans', odometry, 'no topic /wifi/scan'),
+            ('empty', [], 'no topic /wifi/scan'),
+            ('backwards', backwards, 'time going backwards')):
+        bag = _bag(tmp_path / name.replace(' ', '_'), messages)
+        _refused([bag], tmp_path, message)
+
+
+def test_a_missing_odometry_topic_is_named_by_the_tool_that_needs_it(
+        tmp_path, surveyed_model):
+    only_scans = [m for m in run_messages(seconds=60) if m[0] != '/odom']
+    bag = _bag(tmp_path, only_scans)
+    result = run(python_module('cli.fit_odometry', '--model', surveyed_model,
+                               '--data', bag, '-o', tmp_path / 'x.npz'))
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines()[-1].startswith(
+        'error: no --odometry given (the run is not a bag with a odometry '
+        'topic)')
