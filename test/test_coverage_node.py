@@ -1,0 +1,43 @@
+"""Each scan's coverage on ~/place, over real ROS, as the core gives it."""
+
+from pathlib import Path
+
+from conftest import python_module, run
+import numpy as np
+import pytest
+from ros_helpers import running_node
+from wifi_place_recognition.core.evaluation import align
+from wifi_place_recognition.data.fingerprints import read_fingerprints
+from wifi_place_recognition.ros.messages import status_values
+
+RUN = Path(__file__).resolve().parents[2] / 'shared' / 'datasets' / \
+    'robot' / 'b24' / 'b24test2' / 'scans.csv'
+HOLE = (300, 450)   # scan rows cut out of the survey
+
+
+@pytest.mark.skipif(not RUN.exists(), reason='robot runs not available')
+def test_place_carries_each_scans_coverage(ros, tmp_path):
+    lines = RUN.read_text().splitlines(True)
+    survey = tmp_path / 'survey.csv'
+    survey.write_text(lines[0] + ''.join(
+        line for i, line in enumerate(lines[1:])
+        if not HOLE[0] <= i < HOLE[1]))
+    model_path = tmp_path / 'm.npz'
+    result = run(python_module('cli.train_model', '--data', survey, '-o',
+                               model_path, '--quiet'))
+    assert result.returncode == 0, result.stderr
+    fp = read_fingerprints(RUN)
+    with running_node(ros, tmp_path, model_path, 'coverage_node') as (
+            client, proc, model):
+        expected = model.predict_positions(align(model, fp),
+                                           coverage=True)[3]
+        got = []
+        for row in (50, 375, 600):     # covered, inside the hole, covered
+            detected = np.flatnonzero(np.isfinite(fp.rssi[row]))
+            status = client.resend_until_answered(client.scan(
+                [fp.ap_ids[j] for j in detected], fp.rssi[row, detected]),
+                30)
+            assert status is not None
+            got.append(float(status_values(status)['coverage']))
+        np.testing.assert_allclose(got, expected[[50, 375, 600]], atol=2e-3)
+        assert all(0.0 <= p <= 1.0 for p in got)
