@@ -161,5 +161,4 @@ def test_a_missing_odometry_topic_is_named_by_the_tool_that_needs_it(
                                '--data', bag, '-o', tmp_path / 'x.npz'))
     assert result.returncode == 2
     assert result.stderr.strip().splitlines()[-1].startswith(
-        'error: no --odometry given (the run is not a bag with a odometry '
-        'topic)')
+        'error: no --odometry given (the run is not a bag with odometry)')

@@ -233,7 +233,7 @@ def read_pose_input(path, kind, options, from_run=None):
     if path is None:
         if from_run is None:
             raise DataError(f'no {option} given (the run is not a bag with '
-                            f'a {kind} topic)')
+                            f'{kind})')
         return from_run[:, :4]
     if not is_bag(path):
         return read_poses(path)

@@ -1,0 +1,66 @@
+"""
+Bags through the tools that use a model: train, evaluate, replay.
+
+A model trained from a bag of b24test3; evaluate_model gives the same
+figures on the bag as on the run's CSV; replay_run plays a slice of the
+bag into a running classifier_node and scores it against the bag's poses.
+"""
+
+import re
+
+from bag_helpers import RUN, run_messages, write_bag
+from conftest import FAST, python_module, run
+import pytest
+from ros_helpers import NodeProcess
+
+pytestmark = pytest.mark.skipif(not RUN.exists(),
+                                reason='robot runs not available')
+
+
+@pytest.fixture(scope='module')
+def trained(tmp_path_factory):
+    """Return (bag of the whole run, model trained from it)."""
+    folder = tmp_path_factory.mktemp('bag_model')
+    bag = write_bag(folder / 'run', run_messages(), 'sqlite3')
+    model = folder / 'model.npz'
+    result = run(python_module('cli.train_model', '--data', bag, '-o',
+                               model, *FAST))
+    assert result.returncode == 0, result.stderr
+    return bag, model
+
+
+def test_evaluate_model_gives_the_same_figures_on_the_bag(trained):
+    bag, model = trained
+    out = [run(python_module('cli.evaluate_model', '--model', model,
+                             '--data', data))
+           for data in (RUN / 'scans.csv', bag)]
+    assert [o.returncode for o in out] == [0, 0], out[1].stderr
+    # the figures, less the first line (the data's name)
+    figures = [o.stdout.split('\n', 1)[1] for o in out]
+    assert 'position error (m)' in figures[0]
+    assert figures[0] == figures[1]
+
+
+def test_replay_run_plays_a_bag_into_the_node_and_scores_it(trained,
+                                                            tmp_path):
+    _, model = trained
+    bag = write_bag(tmp_path / 'slice', run_messages(seconds=90))
+    node = NodeProcess(tmp_path, python_module(
+        'ros.classifier_node', '--ros-args', '-p',
+        f'model_path:={model}'))
+    try:
+        result = run(python_module('cli.replay_run', '--data', bag,
+                                   '--speed', '10', '--wait', '60'),
+                     timeout=240)
+    finally:
+        code, log = node.stop()
+    assert result.returncode == 0, result.stderr + log
+    assert code == 0, log
+    # every scan with a pose around it answered and scored, fused too
+    answered = re.search(r'(\d+)/(\d+) scans answered', result.stdout)
+    assert answered[1] == answered[2] and int(answered[1]) > 80, \
+        result.stdout
+    assert f'scored {answered[1]} of {answered[1]} scans' in result.stdout
+    fused = re.search(r'mean error \(m\) +[\d.]+ +[\d.]+ +([\d.]+)',
+                      result.stdout)
+    assert float(fused[1]) < 3.0, result.stdout
