@@ -112,3 +112,21 @@ def write_bag(path, messages, storage='mcap'):
             writer.write(connections[topic], ns,
                          TYPES.serialize_cdr(msg, msgtype))
     return Path(path)
+
+
+def write_ros1_bag(path, messages):
+    """Write ``messages`` as a ROS 1 bag (headers get a ``seq``)."""
+    from rosbags.rosbag1 import Writer as Ros1Writer
+    ros1 = get_typestore(Stores.ROS1_NOETIC)
+    connections = {}
+    with Ros1Writer(path) as writer:
+        for topic, msgtype, msg, ns in messages:
+            if topic not in connections:
+                connections[topic] = writer.add_connection(
+                    topic, msgtype, typestore=ros1)
+            fields = dict(vars(msg), header=ros1.types['std_msgs/msg/Header'](
+                seq=0, stamp=msg.header.stamp,
+                frame_id=msg.header.frame_id))
+            writer.write(connections[topic], ns, ros1.serialize_ros1(
+                ros1.types[msgtype](**fields), msgtype))
+    return Path(path)

@@ -11,10 +11,12 @@ CSVs from bag_to_csv. Bad bags are refused in one line, nothing written.
 import json
 import shutil
 
-from bag_helpers import RUN, run_messages, scan_message, write_bag
+from bag_helpers import (RUN, run_messages, scan_message, write_bag,
+                         write_ros1_bag)
 from conftest import python_module, run
 import numpy as np
 import pytest
+from wifi_place_recognition.cli.common import DataOptions, read_run
 from wifi_place_recognition.data.bags import BagOptions, read_bags
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.poses import read_poses
@@ -61,6 +63,19 @@ def test_a_bag_reads_back_as_the_run_s_csvs(bags, storage, as_file):
     assert np.abs(odometry - read_poses(RUN / 'odom.csv')).max() < 2e-6
     assert np.abs(poses[:, :4] - read_poses(RUN / 'poses.csv')).max() < 2e-6
     assert fp.building.tolist() == fp.floor.tolist() == [0] * len(fp)
+
+
+def test_a_ros1_bag_reads_as_the_same_run(bags, tmp_path):
+    messages = run_messages(seconds=120)
+    # as the tools read their --data: a .bag is a bag
+    ros1 = read_run([write_ros1_bag(tmp_path / 'run.bag', messages)],
+                    DataOptions(), 'run')
+    ros2 = read_run([write_bag(tmp_path / 'run', messages)], DataOptions(),
+                    'run')
+    _same_scans(ros1[0], ros2[0])
+    assert np.array_equal(ros1[0].position, ros2[0].position)
+    assert np.array_equal(ros1[1], ros2[1])
+    assert np.array_equal(ros1[2], ros2[2])
 
 
 def test_topics_with_or_without_slash_labels_and_no_poses(bags):
