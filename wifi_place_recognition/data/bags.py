@@ -12,11 +12,13 @@ each message at its ``header.stamp``. A topic of another type is refused
 naming the type; the scans are needed, the odometry and poses not (a tool
 that needs them says so).
 
-The labelling rule (:func:`pose_labels`), the same as the recorder's and
-the shared robot runs': a scan gets the pose linearly interpolated (yaw
-along the shorter arc) between the two poses around its stamp; a scan
-before the first or after the last pose gets none and is left out of a
-labelled run, with a note.
+The labelling rule (:func:`pose_labels`), the shared robot runs': a scan
+gets the pose linearly interpolated (yaw along the shorter arc) between
+the two poses around its stamp; a scan before the first or after the
+last pose gets none and is left out of a labelled run, with a note. (The
+recorder, labelling live, takes the nearest pose within
+``max_pose_age``; why interpolation here: doc/your-building.md, "Bags
+in".)
 
 A scan's readings follow the recorder's rule: readings that are not
 finite or not plausible RSSI are left out (counted), (0, 20] dBm is
