@@ -17,6 +17,12 @@ pose there; instead of the scans' jumps, the filter's fresh starts on its
 floor. The node only adapts :class:`.scan_pipeline.ScanPipeline`, which
 decides all of this (ROS-free, the benchmarks' too): messages, timers,
 QoS and logs are the node's.
+Setting ``model_path`` while running loads the file in the on-set
+callback (a file that does not load, or a model with a position output
+where the running one has none or the other way round, is refused with
+the reason, and the running model goes on); the next scan is answered by
+the new model (:meth:`.scan_pipeline.ScanPipeline.use_model`: the fused
+pose and the current place carry on), and the health status names it.
 Inference is a numpy forward pass: torch is never imported. Each scan is
 processed in the subscription callback. The subscription keeps one scan
 (KEEP_LAST, depth 1): a scan that arrives while another is processed
@@ -40,7 +46,8 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from ..core.artifact import load_model, ModelFileError
-from ..core.pipeline.scan_pipeline import ScanPipeline, SETTINGS
+from ..core.pipeline.scan_pipeline import (ScanPipeline, SETTINGS,
+                                           swap_problem)
 from ..core.recognizer import OK, PlaceRecognizer, WARN
 from ..core.resources import default_model_path
 from ..core.scan import REJECT_REASONS
@@ -94,6 +101,8 @@ class ClassifierNode(Node):
         super().__init__('classifier_node', **kwargs)
         values = declare(self)
         self.odometry = None    # OdometryFusion, with a position model
+        self._make_forward = make_forward
+        self._candidate = None  # (path, model) validated, to swap to
         self.model_path = values['model_path'] or str(default_model_path())
         self.frame_id = values['frame_id']
         check_frame(self.frame_id)
@@ -104,7 +113,7 @@ class ClassifierNode(Node):
                 'publish_initial_pose' if values['publish_initial_pose']
                 else 'initial_pose_on_change'))
         self.pipeline = ScanPipeline(PlaceRecognizer(
-            model, forward=make_forward(model) if make_forward else None))
+            model, forward=self._forward(model)))
         self.pipeline.configure(**{name: values[name]
                                    for name in PIPELINE_SETTINGS})
         if values['publish_initial_pose']:
@@ -135,28 +144,66 @@ class ClassifierNode(Node):
                                 self._on_publish_initial_pose)
             self.odometry = OdometryFusion(self, self.pipeline,
                                            self._publish)
-        self.get_logger().info(
-            f'model {self.model_path}: {len(model.ap_ids)} APs, '
-            f'{len(self.prob_keys)} classes (trained '
-            f'{model.provenance.get("created", "?")})')
+        self.get_logger().info(self._described(model))
+
+    def _forward(self, model):
+        return self._make_forward(model) if self._make_forward else None
+
+    def _described(self, model):
+        return (f'model {self.model_path}: {len(model.ap_ids)} APs, '
+                f'{len(model.class_names)} classes (trained '
+                f'{model.provenance.get("created", "?")})')
 
     # parameters -----------------------------------------------------------
     def _validate_parameters(self, params):
+        self._candidate = None
         for p in params:
             reason = refusal(p.name, p.value,
                              self.pipeline.fusion is not None)
+            if reason is None and p.name == 'model_path':
+                reason = self._load_candidate(p.value)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
+    def _load_candidate(self, value):
+        """Load the model file ``value`` names; return why not, or None."""
+        path = value or str(default_model_path())
+        try:
+            model = load_model(path)
+        except ModelFileError as exc:
+            problem = str(exc)
+        else:
+            problem = swap_problem(self.pipeline.recognizer.model, model)
+        if problem:
+            reason = f'model_path refused ({problem}); still running ' \
+                     f'{self.model_path}'
+            self.get_logger().warn(reason)
+            return reason
+        self._candidate = (path, model)
+        return None
+
     def _apply_parameters(self, params):
         values = {p.name: p.value for p in params}
+        if 'model_path' in values:
+            self._swap()
         self.pipeline.configure(**{name: value for name, value in
                                    values.items()
                                    if name in PIPELINE_SETTINGS})
         self.frame_id = values.get('frame_id', self.frame_id)
         if self.odometry is not None:
             self.odometry.apply(values)
+
+    def _swap(self):
+        """Answer the next scans with the validated candidate; log it."""
+        (path, model), self._candidate = self._candidate, None
+        changed = self.pipeline.use_model(model, self._forward(model))
+        old, self.model_path = self.model_path, path
+        self.prob_keys = [f'prob/{n}' for n in model.class_names]
+        self.get_logger().info(
+            f'model swapped (was {old}): {self._described(model)}; the '
+            f'next scan is answered by it' +
+            ''.join(f'; {c}' for c in changed))
 
     def _on_publish_initial_pose(self, request, response):
         self.pipeline.request_initial_pose()

@@ -60,7 +60,9 @@ TOPICS = (
 PARAMETERS = (
     ('model_path', '', ParameterDescriptor(
         description='model file from train_model; empty: the shipped '
-                    'UJIIndoorLoc model', read_only=True)),
+                    'UJIIndoorLoc model; set while running, the next scan '
+                    'is answered by it (a file that does not load is '
+                    'refused, the running model goes on)')),
     ('min_confidence', 0.5, ParameterDescriptor(
         description='below this top-class probability the status is WARN',
         floating_point_range=float_range(0.0, 1.0))),

@@ -16,6 +16,11 @@ or before its first pose), each once per change and logged; a status on
 its frame, pose and covariance) on ``initialpose`` at start-up and when
 the localiser is lost.
 
+Setting ``model_path`` while running loads the file in the on-set
+callback (one that does not load is refused with the reason, the running
+model goes on); the survey is then the new model's, the judgement carries
+on, and the status on ``/diagnostics`` names the model.
+
 A localiser pose that is not finite, has no unit quaternion or no positive
 definite x, y, yaw covariance, is in a frame ``frame_id`` cannot make, or
 is stamped before the previous one is counted by reason, named in a
@@ -121,6 +126,7 @@ class LocalizationMonitor(Node):
                                      INPUT_QOS),
             self.create_subscription(DiagnosticArray, values['place_topic'],
                                      self._on_place, INPUT_QOS)]
+        self._candidate = None       # (path, model) validated, to use
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
         self._published = None       # the Bool published last
@@ -132,10 +138,19 @@ class LocalizationMonitor(Node):
     # parameters -----------------------------------------------------------
     def _validate(self, params):
         values = {p.name: p.value for p in params}
+        self._candidate = None
         try:
             witness_params(values, self.witness.params)
             if 'frame_id' in values:
                 check_frame(values['frame_id'])
+            if 'model_path' in values:
+                path = values['model_path'] or str(default_model_path())
+                self._candidate = (path, load_model(path))
+        except ModelFileError as exc:
+            reason = (f'model_path refused ({exc}); still using '
+                      f'{self.model_path}')
+            self.get_logger().warn(reason)
+            return SetParametersResult(successful=False, reason=reason)
         except ValueError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
@@ -147,13 +162,26 @@ class LocalizationMonitor(Node):
         if 'frame_id' in values:
             self.frame_id = values['frame_id']
             self.frames = frame_pattern(self.frame_id)
+        if 'model_path' in values:
+            old = self.model_path
+            (self.model_path, self.model), self._candidate = \
+                self._candidate, None
+        if 'frame_id' in values or 'model_path' in values:
             self.witness.survey = survey_of(self.model, self.frame_id)
+        if 'model_path' in values:
+            self.get_logger().info(
+                f'model swapped (was {old}): {self._where()} from '
+                f'{self.model_path}; the judgement carries on')
+            self._publish_status()
         self.reseed = values.get('initial_pose_on_lost', self.reseed)
 
-    def _log_start(self, inputs):
+    def _where(self):
         survey = self.witness.survey
-        where = 'no positions: WiFi cannot tell' if survey is None else \
+        return 'no positions: WiFi cannot tell' if survey is None else \
             f'{sum(map(len, survey.values()))} surveyed positions'
+
+    def _log_start(self, inputs):
+        where = self._where()
         p = self.witness.params
         localizer, fused, place = (s.topic_name for s in inputs)
         self.get_logger().info(
@@ -287,6 +315,7 @@ class LocalizationMonitor(Node):
             _kv('localizer_frame', local.frame if local else ''),
             _kv('wifi_frame', self.last_fused.header.frame_id
                 if self.last_fused else ''),
+            _kv('model_path', self.model_path),
         ] + [_kv(k, self.counts.get(k, 0)) for k in
              ('localizer_poses', 'fused_poses', 'scans', 'seeds_sent',
               'bad_fused')] + \

@@ -67,7 +67,9 @@ PARAMETERS = (
     ('model_path', '', ParameterDescriptor(
         description='the model classifier_node runs (its survey: where the '
                     'scans can testify); empty: the shipped UJIIndoorLoc '
-                    'model', read_only=True)),
+                    'model; set it while running when classifier_node\'s '
+                    'changes (a file that does not load is refused, the '
+                    'running model goes on)')),
     ('localizer_topic', 'amcl_pose', ParameterDescriptor(
         description='the localiser\'s PoseWithCovarianceStamped topic',
         read_only=True)),

@@ -15,7 +15,8 @@ of place or a jump; while fusing, the filter's first pose from that scan
 on in that place (after a change of floor, its start there), and instead
 of the scans' jumps, the filter's fresh starts on its floor. A requested
 one (:meth:`ScanPipeline.request_initial_pose`) is the next confident
-answer's.
+answer's. :meth:`ScanPipeline.use_model` swaps the recognizer's model
+between two scans; the fused pose and the current place carry on.
 """
 
 from collections import Counter
@@ -25,7 +26,7 @@ import time
 import numpy as np
 
 from ..filter.fusion import Fusion
-from ..recognizer import OK, Place
+from ..recognizer import OK, Place, PlaceRecognizer
 from ..scan import ScanRejected
 from .fusion_stage import FusionStage
 from .outputs import Outputs, Pose, Rejected
@@ -72,6 +73,41 @@ class ScanPipeline:
             self.initial_pose_on_change = initial_pose_on_change
         if self.fusion is not None:
             self.fusion.configure(odom_timeout, pose_rate, fusion)
+
+    def use_model(self, model, forward=None):
+        """
+        Recognise the next scans with ``model``; return what it changed.
+
+        Between two scans: no scan is lost or answered twice. The settings
+        carry on, and so do the current place and the fused pose (the
+        filter and its odometry fit: a new ``fusion`` section applies at the
+        next start). The tracked belief carries on when the classes and the
+        tracking section are the same, else starts afresh. Raises ValueError
+        when ``model`` has a position output and the running one has not,
+        or the other way round (what the caller publishes depends on it).
+        """
+        old = self.recognizer
+        problem = swap_problem(old.model, model)
+        if problem:
+            raise ValueError(problem)
+        new = PlaceRecognizer(model, old.min_confidence, old.min_known_aps,
+                              old.mapper.max_aps, forward)
+        new.tracking_timeout = old.tracking_timeout
+        changed = []
+        if old.tracker is not None:
+            if np.array_equal(model.classes, old.model.classes) and \
+                    model.tracking == old.model.tracking:
+                new.tracker = old.tracker
+            else:
+                new.configure(tracking=True)
+                changed.append('the tracked belief starts afresh (other '
+                               'classes or tracking section)')
+        if self.fusion is not None and model.fusion != old.model.fusion:
+            changed.append('the fused pose keeps the running odometry fit '
+                           '(the new fusion section applies at the next '
+                           'start)')
+        self.recognizer = new
+        return changed
 
     def request_initial_pose(self):
         """Send the next confident answer's pose on initialpose."""
@@ -189,6 +225,21 @@ class ScanPipeline:
             elif relocated and self.initial_pose_on_change:
                 pose.initial = ['the fused pose started afresh']
             out.poses.append(pose)
+
+
+def swap_problem(running, model):
+    """
+    Return why ``model`` cannot replace the ``running`` one, or None.
+
+    Either both have a position output or neither: what a caller
+    publishes depends on it.
+    """
+    if (model.position is None) == (running.position is None):
+        return None
+    has = 'has no' if running.position is None else 'has a'
+    this = 'one' if model.position is not None else 'none'
+    return (f'the running model {has} position output and this one has '
+            f'{this}: restart the node to change that')
 
 
 def position_answer(xy, sigma=math.nan, place=(0, 0), coverage=None):
