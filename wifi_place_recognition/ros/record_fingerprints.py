@@ -45,7 +45,6 @@ from collections import Counter, deque
 import copy
 from pathlib import Path
 import sys
-import tempfile
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped
@@ -56,6 +55,7 @@ from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data,
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
+from .kept_files import KeptFiles
 from .messages import pose_problem, seconds, stamp_time, yaw_of
 from .node_interface import declare
 from .recorder_parameters import PARAMETERS
@@ -95,18 +95,16 @@ class RecordFingerprintsNode(Node):
         self.counts = Counter(scans_received=0, scans_paused=0,
                               scans_unusable=0, scans_lost=0,
                               skipped_readings=0, write_errors=0)
-        #: (log, what its rows are, its write-error count) of each file.
-        self._files = [(self.log, 'scans', 'write_errors')]
-        self._failing = set()
+        self.files = KeptFiles(self.get_logger(), self.counts)
+        self.files.add(self.log, 'scans', 'write_errors')
         self._gaps = PublisherGaps()
         self._odometry = None
         if odom_topic:
             self._odometry = PoseLog(odometry_path(output))
-            self._files.append((self._odometry, 'odometry poses',
-                                'odometry_write_errors'))
             self.counts.update(odometry_received=0, odometry_invalid=0,
-                               odometry_out_of_order=0,
-                               odometry_write_errors=0)
+                               odometry_out_of_order=0)
+            self.files.add(self._odometry, 'odometry poses',
+                           'odometry_write_errors')
             self._odom_sub = self.create_subscription(
                 Odometry, odom_topic, self._on_odometry, ODOM_QOS,
                 qos_overriding_options=QoSOverridingOptions(
@@ -210,7 +208,7 @@ class RecordFingerprintsNode(Node):
         recorded, skipped = self.log.add(msg.name, msg.position, building,
                                          floor, seconds(msg.header.stamp),
                                          position)
-        self._check_written(*self._files[0])
+        self.files.check(self.log)
         self.counts['skipped_readings'] += skipped
         if not recorded:
             self.counts['scans_unusable'] += 1
@@ -227,39 +225,16 @@ class RecordFingerprintsNode(Node):
             self.get_logger().info(f'building {building}, floor {floor}: '
                                    f'{n} scans')
 
-    def _check_written(self, log, what, errors):
-        """Log a write error of ``log`` (throttled), or that it works again."""
-        if log.write_error is not None:
-            if log.path not in self._failing:
-                self.counts[errors] += 1
-            self._failing.add(log.path)
-            self.get_logger().error(
-                f'cannot write {log.path}: {log.write_error}; '
-                f'{len(log.pending)} {what} kept in memory, retrying every '
-                f'second' + (' and with each scan' if log is self.log
-                             else ''), throttle_duration_sec=THROTTLE_S)
-        elif log.path in self._failing:
-            self._failing.discard(log.path)
-            self.get_logger().info(f'writing {log.path} works again: the '
-                                   f'{what} kept in memory are written')
-
     def _publish_progress(self):
-        for log, what, errors in self._files:
-            if log.pending:
-                log.flush()
-                self._check_written(log, what, errors)
+        self.files.flush()
         counts = sorted(self.log.counts.items())
         level, message = DiagnosticStatus.OK, ', '.join(
             f'B{b}F{f}: {n}' for (b, f), n in counts) or 'no scans yet'
         if self._odometry is not None:
             message += f'; {self._odometry.written} odometry poses'
-        for log, what, _ in reversed(self._files):
-            if log.write_error is not None:
-                level = DiagnosticStatus.ERROR
-                name = '' if log is self.log else f' {log.path.name}'
-                message = (f'cannot write{name}: {log.write_error}; '
-                           f'{len(log.pending)} {what} kept in memory; '
-                           + message)
+        failing = self.files.failing()
+        if failing:
+            level, message = DiagnosticStatus.ERROR, failing + message
         values = [KeyValue(key=f'scans/B{b}F{f}', value=str(n))
                   for (b, f), n in counts] + [
             KeyValue(key='aps', value=str(len(self.log.ap_ids))),
@@ -280,24 +255,8 @@ class RecordFingerprintsNode(Node):
 
     def destroy_node(self):
         """Write what waits in memory (else to a fallback file), then stop."""
-        for log, what, _ in self._files:
-            if log.pending and not log.flush():
-                self._save_pending(log, what)
+        self.files.save()
         super().destroy_node()
-
-    def _save_pending(self, log, what):
-        n = len(log.pending)
-        for folder in (tempfile.gettempdir(), Path.home()):
-            try:
-                path = log.save_pending(folder)
-            except OSError as exc:
-                self.get_logger().error(f'cannot save to {folder}: {exc}')
-                continue
-            self.get_logger().error(
-                f'cannot write {log.path}: {log.write_error}; the {n} '
-                f'{what} not in it are saved in {path}')
-            return
-        self.get_logger().fatal(f'{n} {what} could not be saved')
 
 
 def main(args=None):
