@@ -141,6 +141,8 @@ def test_a_truncated_bag_is_refused_in_one_line(bags, tmp_path, storage):
     data = next(f for f in bag.iterdir() if f.name != 'metadata.yaml')
     data.write_bytes(data.read_bytes()[:data.stat().st_size // 2])
     _refused([bag], tmp_path, 'truncated or corrupt')
+    # a good bag before it: nothing of it written either
+    _refused([bags[storage], bag], tmp_path, 'truncated or corrupt')
 
 
 def _bag(tmp_path, messages, storage='mcap'):
