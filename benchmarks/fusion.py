@@ -47,6 +47,7 @@ import tempfile
 
 import numpy as np
 from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.core.coverage import COVERED_M
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.filter.fusion import Fusion
@@ -68,8 +69,6 @@ RECOVERED_HOLD_S = 10.0
 #: Survey holes: pieces of this many metres driven, every third cut.
 HOLE_PIECE_M = (15.0, 25.0)
 HOLE_EVERY = 3
-#: A test scan farther than this from every kept training scan is in a hole.
-COVERED_M = 3.0
 #: Errors are scored after this many seconds (the start has no prior).
 SETTLE_S = 60.0
 GOALS = ('fused/single <= 0.5 and never > 1 (any pair, seed), p95 <= 2.5 m, '
@@ -353,7 +352,7 @@ def coverage_line(name, survey, figures):
     d = figures['coverage_detector']
     a = 'n/a' if d.get('auc') is None else f'{d["auc"]:.2f}'
     return (f'{name:22s} {survey:6s} detector AUC {a:>4s} | ratio: '
-            f'default {mean(figures["fused_fitted"]):.2f}, weighed '
+            f'coverage off {mean(figures["fused_fitted"]):.2f}, weighed '
             f'{mean(figures["fused_coverage"]):.2f}, told the holes '
             f'{mean(figures["fused_told_holes"]):.2f}')
 

@@ -18,6 +18,9 @@ from wifi_place_recognition.training.coverage import (auc, fit_coverage,
 
 ROBOT = Path(__file__).resolve().parents[2] / 'shared' / 'datasets' / \
     'robot' / 'b24'
+#: A model with a position output, shipped with the package.
+SHIPPED = Path(__file__).resolve().parents[1] / 'models' / \
+    'ujiindoorloc.npz'
 
 
 def _model(**change):
@@ -88,12 +91,15 @@ def test_a_scan_off_the_survey_moves_no_particle_and_never_restarts():
 
 
 def test_coverage_full_zero_leaves_the_filter_as_it_was():
-    sensor = WifiSensorModel(FusionParams())
-    state = np.zeros((2, 4))
-    state[1, 0] = 8.0
-    assert np.array_equal(
-        sensor.likelihood(state, WifiPosition(np.zeros(2), coverage=0.0)),
-        sensor.likelihood(state, WifiPosition(np.zeros(2))))
+    params = FusionParams()
+    sensor = WifiSensorModel(params)
+    state = np.zeros((1000, 4))
+    state[:, 0] = np.linspace(0.0, 12.0, 1000)
+    before = (1 - params.wifi_outlier) * np.exp(
+        -state[:, 0] ** 2 / (2 * params.wifi_sd ** 2)) + params.wifi_outlier
+    for coverage in (None, 0.0, 0.7):   # round 5's formula, to the bit
+        assert np.array_equal(sensor.likelihood(
+            state, WifiPosition(np.zeros(2), coverage=coverage)), before)
     with pytest.raises(ValueError, match='coverage_full'):
         FusionParams(coverage_full=1.5)
 
@@ -127,6 +133,35 @@ def test_train_model_learns_coverage_from_a_robot_run(tmp_path):
     middle = np.zeros(len(p_held), bool)
     middle[2 * n // 5 + 20:3 * n // 5 - 20] = True  # inside the hole
     assert p_held[middle].mean() < p_held[~middle].mean()
+
+
+@pytest.mark.parametrize('section, named', [
+    ('not a dict', 'coverage must be an object'),
+    ({'mean': [0] * 4}, 'missing'),
+    (dict(_model().to_dict(), extra=1), 'unknown coverage key'),
+    (dict(_model().to_dict(), intercept=10 ** 400), 'intercept'),
+])
+def test_a_bad_coverage_section_in_a_file_is_refused_in_one_line(
+        section, named, tmp_path):
+    import json
+    import zipfile
+    from wifi_place_recognition.core.artifact import _digest
+    path = tmp_path / 'm.npz'
+    model = load_model(SHIPPED) if SHIPPED.exists() else None
+    if model is None:
+        pytest.skip('no model with a position output')
+    save_model(model, path)
+    with np.load(path) as f:
+        arrays = {k: f[k] for k in f.files}
+    header = json.loads(arrays.pop('header').tobytes())
+    header.pop('sha256')
+    header['coverage'] = section
+    header['sha256'] = _digest(header, arrays)
+    arrays['header'] = np.frombuffer(json.dumps(header).encode(), np.uint8)
+    np.savez(path, **arrays)
+    assert zipfile.is_zipfile(path)
+    with pytest.raises(ModelFileError, match=named):
+        load_model(path)
 
 
 def test_a_coverage_section_without_a_position_output_is_refused(

@@ -68,8 +68,14 @@ def test_the_holes_of_the_survey_are_the_stretches_listed(holed, capsys,
 def test_a_run_without_positions_needs_a_coverage_model(holed, capsys):
     model, run = holed
     assert main(['--model', str(model), '--data', str(run),
-                 '--position-columns', 'none']) == 0
-    assert 'model coverage probability' in capsys.readouterr().out
+                 '--position-columns', 'none', '--json']) == 0
+    result = json.loads(capsys.readouterr().out, parse_constant=lambda c:
+                        pytest.fail(f'{c} is not JSON'))
+    assert result['basis'] == 'model coverage probability < 0.5'
+    assert all(s['length_m'] is None for s in result['stretches'])
+    # the shipped model has positions but no coverage section
+    assert main(['--data', str(run), '--position-columns', 'none']) == 2
+    assert 'no coverage section' in capsys.readouterr().err
 
 
 def test_bad_arguments_are_refused_with_one_line(holed, capsys, tmp_path):

@@ -280,3 +280,19 @@ def test_the_state_says_agrees_only_when_wifi_compared():
         w.scan(k, 'map', truth(k)[0], 1.0)
         w.fused(k, 'map', *truth(k), cov())
     assert w.state == LOST and w.why.startswith('20.0 m ('), w.why
+
+
+def test_wifi_that_disagrees_before_the_alarm_does_not_agree():
+    # the localiser on another floor's frame: evidence builds for a few
+    # judgements before the alarm; none of them says "agrees"
+    w = Witness(WitnessParams())
+    states, whys = [], []
+    for k in range(12):
+        w.localiser(k, 'map_b0_f1', *truth(k), cov(0.1))
+        w.fused(k, 'map_b0_f2', *truth(k), cov())
+        states.append(w.state)
+        whys.append(w.why)
+    assert AGREES not in states, list(zip(states, whys))
+    assert CANNOT_TELL in states and states[-1] == LOST
+    doubt = whys[states.index(CANNOT_TELL)]
+    assert doubt.startswith('WiFi disagrees so far'), whys

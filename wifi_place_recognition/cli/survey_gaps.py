@@ -75,7 +75,7 @@ def main(argv=None):
     if args.plot:
         _plot(args.plot, model, fp.position, found['off'], stretches, order)
     if args.json:
-        print(json.dumps(result))
+        print(json.dumps(_finite(result), allow_nan=False))
         return 0
     print(f'{fp.source}: {len(fp)} scans, {result["scans_off_survey"]} off '
           f'the survey ({found["basis"]}); {len(stretches)} stretches of '
@@ -93,13 +93,25 @@ def main(argv=None):
     return 0
 
 
+def _finite(value):
+    """Return ``value`` with every non-finite float as None (for JSON)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def off_survey(model, fp, covered_m):
     """
     Return {'off': bool per scan, 'basis': how it was judged}.
 
-    From positions when the run has them (the nearest survey scan of
-    the scan's building/floor, or of the recognised one when the model
-    does not know it); else from the model's coverage probability.
+    From positions when the run has them (the nearest survey scan the
+    scan's building/floor searches, or the recognised one's when the
+    model does not know it: its floor's, or its building's when the
+    model searches the building); else from the coverage probability.
     """
     rssi = align(model, fp)
     proba, _, _, coverage = model.predict_positions(rssi, coverage=True)

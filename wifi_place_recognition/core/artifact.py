@@ -120,7 +120,7 @@ def load_model(path):
         return _build(header, arrays)
     except ModelFileError as exc:
         raise ModelFileError(f'{path}: {exc}') from None
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, ArithmeticError) as exc:
         raise ModelFileError(f'{path}: malformed model file ({exc})') from None
     finally:
         _release_freed_memory()

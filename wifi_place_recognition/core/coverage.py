@@ -19,6 +19,10 @@ import math
 
 import numpy as np
 
+#: A scan is covered when a survey scan of its place lies this close (m):
+#: the label the model learns, and what survey_gaps and the benchmarks
+#: count as a hole.
+COVERED_M = 3.0
 #: What :func:`features` returns, in order.
 FEATURES = ('log_sigma', 'log_neighbour_ratio', 'log_spread',
             'unheard_share')
@@ -147,5 +151,9 @@ class CoverageModel:
 
 
 def _finite(value):
-    return isinstance(value, (int, float)) and not isinstance(value, bool) \
-        and math.isfinite(value)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:       # an integer too large for a float
+        return False

@@ -14,8 +14,7 @@ import math
 
 import numpy as np
 
-#: A scan is covered with a survey scan this close (m), as in training.
-COVERED_M = 3.0
+from .coverage import COVERED_M  # noqa: F401 (the default, re-exported)
 
 
 @dataclass(frozen=True)

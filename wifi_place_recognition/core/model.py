@@ -173,23 +173,24 @@ class PlaceModel:
         sigma, covered = np.empty(len(best)), np.full(len(best), np.nan)
         for i, (row, c) in enumerate(zip(np.asarray(rssi, np.float32), best)):
             columns = np.flatnonzero(~np.isnan(row))
-            xy[i], sigma[i], p = self.locate(columns, row[columns], c)
+            xy[i], sigma[i], p = self.locate(columns, row[columns], c,
+                                             coverage=coverage)
             covered[i] = np.nan if p is None else p
         return (proba, xy, sigma) + ((covered,) if coverage else ())
 
-    def locate(self, columns, rssi, c, unknown=0):
+    def locate(self, columns, rssi, c, unknown=0, coverage=True):
         """
         Return (xy (2,), sigma m, P(covered) or None) of one scan of class c.
 
         ``columns``/``rssi``: its APs known to the model and their readings
         (dBm); ``unknown``: how many more it heard. The probability is
-        None without a coverage model.
+        None without a coverage model (or ``coverage`` false).
         """
         locator = self.position
         distance = locator.distances(
             columns, signal(rssi, locator.representation), c)
         xy, sigma = locator.weighted(distance, locator.neighbours, c)
-        if self.coverage is None:
+        if self.coverage is None or not coverage:
             return xy, sigma, None
         x = features(locator, distance, c,
                      unheard_share(locator, columns, c, unknown))

@@ -192,7 +192,9 @@ class Witness:
             return WAITING
         if self.ok is False:
             return LOST
-        return AGREES if self._recent_testimony() else CANNOT_TELL
+        if not self._recent_testimony():
+            return CANNOT_TELL
+        return AGREES if self.evidence.level == 0 else CANNOT_TELL
 
     @property
     def why(self):
@@ -207,6 +209,8 @@ class Witness:
             return self.testified[witness][1]
         if state == AGREES:
             return ''
+        if self._recent_testimony():    # disagreeing, not yet lost
+            return f'WiFi disagrees so far ({self.score:.0%} of the alarm)'
         if self.last is None:
             return 'no WiFi pose or scan yet'
         if not self.last.testified:

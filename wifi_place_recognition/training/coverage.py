@@ -13,7 +13,7 @@ it says (reliability bins).
 
 import numpy as np
 
-from ..core.coverage import CoverageModel, FEATURES
+from ..core.coverage import COVERED_M, CoverageModel, FEATURES
 
 #: Fewer held-out scans of either label than this: no coverage model.
 MIN_EXAMPLES = 20
@@ -103,9 +103,9 @@ def fit_coverage(x, covered, fold, log=print):
               'cross_fitted_scans': int(scored.sum()),
               'auc': _rounded(auc(crossed[scored], covered[scored])),
               'ece': _rounded(ece), 'reliability': table,
-              'protocol': 'fitted on the held-out scans of every fold but '
-                          'one, scored on that one (labels: a kept scan of '
-                          'the class within 3 m)'}
+              'protocol': f'fitted on the held-out scans of every fold '
+                          f'but one, scored on that one (labels: a kept '
+                          f'scan of the class within {COVERED_M:g} m)'}
     log(f'coverage: {n1} held-out scans near a kept one, {n0} not; '
         f'cross-fitted ROC AUC {report["auc"]}, calibration error '
         f'{report["ece"]}')

@@ -15,7 +15,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from ..core.coverage import features as coverage_features, unheard_share
+from ..core.coverage import (COVERED_M, features as coverage_features,
+                             unheard_share)
 from ..core.evaluation import align
 from ..core.locator import calibrated_sigma, Locator, METRICS
 from ..core.metrics import expected_calibration_error
@@ -272,10 +273,9 @@ def _coverage_examples(splits, predicted, n_classes, space, k, sigma):
     return np.array(x), np.concatenate(covered), np.concatenate(fold)
 
 
-#: The sigma is calibrated on held-out scans taken within this many metres
-#: of a kept scan of their building/floor (the surveyed area, where a
-#: robot is placed); unless fewer than MIN_COVERED are.
-COVERED_M = 3.0
+#: The sigma is calibrated on held-out scans taken within COVERED_M of a
+#: kept scan of their building/floor (the surveyed area, where a robot is
+#: placed); unless fewer than MIN_COVERED are.
 MIN_COVERED = 30
 
 

@@ -116,5 +116,7 @@ class WifiSensorModel:
         p = self.params
         width = self.width(scan)
         d2 = ((state[:, :2] - scan.xy) ** 2).sum(axis=1)
-        weight = (1 - p.wifi_outlier) * self.trust(scan)
-        return weight * np.exp(-d2 / (2 * width * width)) + 1 - weight
+        trust = self.trust(scan)
+        floor = p.wifi_outlier + (1 - p.wifi_outlier) * (1 - trust)
+        return (1 - p.wifi_outlier) * trust * \
+            np.exp(-d2 / (2 * width * width)) + floor
