@@ -21,6 +21,8 @@ console_scripts = [
     'wifi_place_recognition.ros.executables:record_fingerprints',
     'localization_monitor = '
     'wifi_place_recognition.ros.executables:localization_monitor',
+    'trusted_recorder = '
+    'wifi_place_recognition.ros.executables:trusted_recorder',
 ]
 # `ros2 run` runs <prefix>/lib/<package>/<executable>. colcon's builds
 # (setup.py install / develop) put the console scripts there by setup.cfg;

@@ -18,14 +18,16 @@ from rcl_interfaces.srv import ListParameters
 from wifi_place_recognition.ros import (classifier_parameters,
                                         monitor_parameters,
                                         recorder_parameters,
-                                        scanner_parameters)
+                                        scanner_parameters,
+                                        trusted_parameters)
 from wifi_place_recognition.ros.node_interface import interface_type
 
 BIN = Path(sys.executable).parent
 TABLES = {'classifier_node': classifier_parameters,
           'wifi_scanner_node': scanner_parameters,
           'record_fingerprints': recorder_parameters,
-          'localization_monitor': monitor_parameters}
+          'localization_monitor': monitor_parameters,
+          'trusted_recorder': trusted_parameters}
 
 
 def _console_scripts():
@@ -85,6 +87,8 @@ def _command(executable, option, folder, last, module=False):
     elif executable == 'record_fingerprints':
         args = ['--ros-args', '-p', f'output:={folder / "out" / "rec.csv"}',
                 '-p', 'building:=0', '-p', 'floor:=0']
+    elif executable == 'trusted_recorder':
+        args = ['--ros-args', '-p', f'output:={folder / "out" / "rec.csv"}']
     command = [sys.executable, '-m', f'wifi_place_recognition.ros.{executable}'
                ] if module else [str(BIN / executable)]
     return command + ([*args, option] if last else [option, *args]), env
@@ -181,6 +185,7 @@ NODES = {
     'record_fingerprints': ['-p', 'pose_topic:=/amcl_pose',
                             '-p', 'odom_topic:=odom'],
     'localization_monitor': [],     # the shipped model
+    'trusted_recorder': [],
 }
 
 
@@ -189,7 +194,7 @@ def test_a_running_node_declares_the_tables_parameters_and_topics(
         ros, tmp_path, executable):
     table = TABLES[executable]
     args = list(NODES[executable])
-    if executable == 'record_fingerprints':
+    if executable in ('record_fingerprints', 'trusted_recorder'):
         args += ['-p', f'output:={tmp_path / "rec.csv"}']
     env = dict(os.environ, PATH=f'{tmp_path}{os.pathsep}/usr/bin:/bin')
     params = {name: default for name, default, _ in table.PARAMETERS}

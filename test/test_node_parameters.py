@@ -79,7 +79,8 @@ def test_config_file_and_docs_table_match_the_declared_parameters(
 @pytest.mark.parametrize('node,module', [
     ('wifi_scanner_node', 'scanner_parameters'),
     ('record_fingerprints', 'recorder_parameters'),
-    ('localization_monitor', 'monitor_parameters')])
+    ('localization_monitor', 'monitor_parameters'),
+    ('trusted_recorder', 'trusted_parameters')])
 def test_docs_tables_match_the_scanner_and_recorder_parameters(node, module):
     parameters = importlib.import_module(
         f'wifi_place_recognition.ros.{module}').PARAMETERS

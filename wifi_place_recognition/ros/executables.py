@@ -90,3 +90,8 @@ def record_fingerprints():
 def localization_monitor():
     """Run ``localization_monitor``; return its exit code."""
     return _main('localization_monitor', 'monitor_parameters')
+
+
+def trusted_recorder():
+    """Run ``trusted_recorder``; return its exit code."""
+    return _main('trusted_recorder', 'trusted_parameters')

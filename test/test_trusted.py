@@ -1,0 +1,45 @@
+"""The rule of a trusted scan (core.trusted), no ROS."""
+
+from dataclasses import replace
+
+from wifi_place_recognition.core.trusted import (
+    is_jump, LocaliserPose, REASONS, TrustParams, untrusted)
+
+P = TrustParams()
+HERE = LocaliserPose(100.0, 5.0, 5.0, 0.0, 'map', 0.1)
+
+
+def verdict(stamp=100.5, pose=HERE, last_jump=None, witness='agrees',
+            place=(0, 1)):
+    return untrusted(stamp, pose, last_jump, witness, place, P)
+
+
+def test_a_confident_localiser_labels_the_scan_also_where_wifi_cannot_tell():
+    assert verdict() is None
+    assert verdict(witness='cannot_tell') is None
+
+
+def test_nothing_is_trusted_while_lost_waiting_or_uncertain():
+    assert verdict(witness='lost') == 'lost'
+    assert verdict(witness='waiting') == 'witness_waiting'
+    assert verdict(witness=None) == 'witness_waiting'
+    assert verdict(place=None) == 'no_place'
+    assert verdict(pose=None) == 'no_pose'
+    assert verdict(stamp=100.0 + P.max_pose_age + 0.1) == 'no_pose'
+    assert verdict(pose=replace(HERE, sd=P.max_sd + 0.01)) == 'uncertain'
+    assert verdict(pose=replace(HERE, sd=float('nan'))) == 'uncertain'
+    assert verdict(last_jump=100.5 - P.settle_s + 0.1) == 'jumped'
+    assert verdict(last_jump=100.5 - P.settle_s - 0.1) is None
+    assert verdict(last_jump=101.0) == 'jumped'   # since the scan
+    assert set(REASONS) == {'no_place', 'witness_waiting', 'lost',
+                            'no_pose', 'uncertain', 'jumped'}
+
+
+def test_a_jump_is_a_step_faster_than_driving_or_another_frame():
+    # 1 s later: up to jump_m + max_speed * 1 s is driving
+    near = replace(HERE, stamp=101.0, x=HERE.x + 1.4)
+    far = replace(HERE, stamp=101.0, x=HERE.x + 1.6)
+    assert not is_jump(HERE, near, P)
+    assert is_jump(HERE, far, P)
+    assert is_jump(HERE, replace(HERE, frame='map_f1'), P)
+    assert LocaliserPose.sd_of(0.01, 0.04) == 0.2

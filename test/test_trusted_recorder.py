@@ -1,0 +1,124 @@
+"""
+trusted_recorder over real ROS: a survey kept only while the localiser is.
+
+The test plays the localiser (``amcl_pose``), localization_monitor (its
+latched ``~/status``), classifier_node (its latched ``~/current_place``)
+and the scanner, one scan a second just after each localiser pose; the
+recorder runs in its own process. Phases: the witness agrees (recorded),
+says lost (not), cannot tell (recorded: a survey hole), agrees while the
+localiser's covariance is large (not), the localiser jumps 10 m (nothing
+for ``settle_s`` seconds, then recorded again). The CSV must hold exactly
+the trusted scans, labelled with the localiser's pose and the current
+place.
+"""
+
+import csv
+import math
+
+from conftest import mac, python_module, wait_until
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from ros_helpers import NodeProcess, RELIABLE
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from test_localization_monitor import LATCHED, pose
+from wifi_place_recognition.ros.messages import key_value, status_values
+
+T0 = 7000.0
+NAME = 'trusted_node'
+#: (witness state, localiser sd m, offset m) of each phase, 4 scans each;
+#: the jump's phase twice as long (settle_s 5 s).
+PHASES = [('agrees', 0.1, 0.0), ('lost', 0.1, 0.0),
+          ('cannot_tell', 0.1, 0.0), ('agrees', 0.5, 0.0),
+          ('agrees', 0.1, 10.0), ('agrees', 0.1, 10.0)]
+RECORDED = [0, 1, 2, 3, 8, 9, 10, 11, 21, 22, 23]
+
+
+class Recorder:
+    """A trusted_recorder process and the test's side of its topics."""
+
+    def __init__(self, ros, tmp_path):
+        self.ros = ros
+        self.output = tmp_path / 'learned.csv'
+        self.proc = NodeProcess(tmp_path, python_module(
+            'ros.trusted_recorder', '--ros-args', '-p',
+            f'output:={self.output}'), NAME)
+        self.local = ros.create_publisher(PoseWithCovarianceStamped,
+                                          'amcl_pose', RELIABLE)
+        self.status = ros.create_publisher(
+            String, 'localization_monitor/status', LATCHED)
+        self.place = ros.create_publisher(
+            DiagnosticArray, 'classifier_node/current_place', LATCHED)
+        self.scans = ros.create_publisher(JointState, 'wifi/scan', RELIABLE)
+        self.progress = []
+        self.sub = ros.create_subscription(DiagnosticArray, '/diagnostics',
+                                           self._on_diag, RELIABLE)
+        assert wait_until(lambda: all(
+            p.get_subscription_count() for p in (
+                self.local, self.status, self.place, self.scans)), 60,
+            ros), self.proc.stop()[1]
+
+    def _on_diag(self, msg):
+        self.progress += [status_values(s) for s in msg.status
+                          if s.name == f'{NAME}: progress']
+
+    def wait_for(self, key, value):
+        """Wait until the progress status has ``key`` = ``value``."""
+        assert wait_until(lambda: self.progress and
+                          self.progress[-1][key] == str(value), 30,
+                          self.ros), (key, value, self.progress[-1:])
+
+    def say(self, state):
+        self.status.publish(String(data=state))
+        self.wait_for('witness', state)
+
+    def step(self, k, sd, offset):
+        """Send the localiser's pose at step ``k``, then a scan."""
+        self.local.publish(pose(T0 + k, 10.0 + 0.5 * k + offset, 20.0, 0.0,
+                                sd=sd))
+        wait_until(lambda: False, 0.05, self.ros)
+        scan = JointState(name=[mac(i) for i in range(4)],
+                          position=[-50.0, -60.0, -70.0, -80.0 - k % 5])
+        scan.header.stamp.sec = int(T0 + k)
+        scan.header.stamp.nanosec = 100_000_000
+        self.scans.publish(scan)
+        wait_until(lambda: False, 0.05, self.ros)
+
+    def close(self):
+        code, log = self.proc.stop()
+        assert code == 0 and 'Traceback' not in log, log
+        return log
+
+
+def test_scans_are_recorded_while_trusted_also_where_wifi_cannot_tell(
+        ros, tmp_path):
+    r = Recorder(ros, tmp_path)
+    r.place.publish(DiagnosticArray(status=[DiagnosticStatus(
+        name='classifier_node: current place', values=[
+            key_value('building', 0), key_value('floor', 1),
+            key_value('frame_id', 'map')])]))
+    r.wait_for('place', 'B0F1')
+    k = 0
+    for state, sd, offset in PHASES:
+        r.say(state)
+        for _ in range(4):
+            r.step(k, sd, offset)
+            k += 1
+    r.wait_for('scans_received', k)
+    values = r.progress[-1]
+    log = r.close()
+    with open(r.output) as f:
+        rows = list(csv.DictReader(f))
+    steps = [round(float(row['TIMESTAMP']) - T0 - 0.1) for row in rows]
+    assert steps == RECORDED, (steps, values, log)
+    for step, row in zip(steps, rows):
+        offset = 10.0 if step >= 16 else 0.0
+        assert math.isclose(float(row['X']), 10.0 + 0.5 * step + offset)
+        assert (row['BUILDINGID'], row['FLOOR'], row['FRAME']) == \
+            ('0', '1', 'map'), row
+    assert values['skipped/lost'] == '4', values
+    assert values['skipped/uncertain'] == '4', values
+    assert values['skipped/jumped'] == '5', values
+    assert values['localizer_jumps'] == '1', values
+    assert 'not recording: the WiFi witness says the localiser is lost' \
+        in log and 'the localiser jumped 10.50 m in 1.00 s' in log, log

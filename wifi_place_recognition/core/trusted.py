@@ -1,0 +1,97 @@
+"""
+Whether a scan labelled by the robot's localiser is trusted (ROS-free).
+
+A robot that knows where it is can survey as it works: each WiFi scan
+labelled with the localiser's pose (AMCL's) is a survey scan, but only
+while that pose can be trusted, for a poisoned survey is worse than a thin
+one. :func:`untrusted` says why a scan is not, or None: the localiser's
+pose nearest the scan in time must be at most ``max_pose_age`` seconds
+from it, its x and y standard deviations at most ``max_sd`` metres, and
+no jump of the localiser (:func:`is_jump`) in the ``settle_s`` seconds
+before the scan or since; the WiFi witness (localization_monitor's state)
+must not say ``lost``, and must have started (not ``waiting``). Its
+``cannot_tell`` does not block: inside a survey hole WiFi cannot testify,
+and that is where recording matters. The building and floor come from
+the current place; with none yet, nothing is trusted.
+"""
+
+from dataclasses import dataclass
+import math
+
+from .witness import AGREES, CANNOT_TELL, LOST
+
+#: Why a scan was not trusted, and what that means.
+REASONS = {
+    'no_place': 'no current place (building, floor) yet',
+    'witness_waiting': 'the WiFi witness has not started',
+    'lost': 'the WiFi witness says the localiser is lost',
+    'no_pose': 'no localiser pose near the scan in time',
+    'uncertain': 'the localiser is not sure of its pose',
+    'jumped': 'the localiser jumped a moment ago',
+}
+
+
+@dataclass(frozen=True)
+class TrustParams:
+    """When a localiser pose may label a scan (see the module)."""
+
+    max_sd: float = 0.2         # m: largest x or y standard deviation
+    jump_m: float = 0.5         # m beyond what max_speed covers: a jump
+    max_speed: float = 1.0      # m/s the robot can drive
+    settle_s: float = 5.0       # s after a jump: nothing trusted
+    max_pose_age: float = 2.0   # s between a scan and its pose
+
+
+@dataclass(frozen=True)
+class LocaliserPose:
+    """One pose of the localiser: stamp (s), x, y (m), yaw (rad), frame."""
+
+    stamp: float
+    x: float
+    y: float
+    yaw: float
+    frame: str
+    sd: float                   # m: the larger of the x and y deviations
+
+    @staticmethod
+    def sd_of(cov_xx, cov_yy):
+        """Return the larger standard deviation of two variances (m^2)."""
+        return math.sqrt(max(cov_xx, cov_yy))
+
+
+def is_jump(before, after, params):
+    """
+    Return True if the localiser jumped from pose ``before`` to ``after``.
+
+    A jump: another frame, or a step longer than ``jump_m`` plus what
+    ``max_speed`` covers between their stamps (a re-seed, a recovery, a
+    localiser that caught up with its error).
+    """
+    if after.frame != before.frame:
+        return True
+    step = math.hypot(after.x - before.x, after.y - before.y)
+    driven = params.max_speed * abs(after.stamp - before.stamp)
+    return step > params.jump_m + driven
+
+
+def untrusted(stamp, pose, last_jump, witness, place, params):
+    """
+    Return why the scan taken at ``stamp`` (s) is not trusted, or None.
+
+    ``pose``: the localiser's :class:`LocaliserPose` nearest the scan in
+    time (None: none yet); ``last_jump``: the stamp of its newest jump
+    (None: none); ``witness``: the WiFi witness's state (None: not heard
+    yet); ``place``: the current (building, floor) or None. The reason is
+    a key of :data:`REASONS`.
+    """
+    if place is None:
+        return 'no_place'
+    if witness not in (AGREES, CANNOT_TELL):
+        return 'lost' if witness == LOST else 'witness_waiting'
+    if pose is None or abs(pose.stamp - stamp) > params.max_pose_age:
+        return 'no_pose'
+    if not pose.sd <= params.max_sd:
+        return 'uncertain'
+    if last_jump is not None and last_jump >= stamp - params.settle_s:
+        return 'jumped'
+    return None
