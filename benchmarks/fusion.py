@@ -32,6 +32,7 @@ one run's trajectories per building, seed 0, which
 ``benchmarks/figures.py`` draws).
 
     python benchmarks/fusion.py [--data ../shared/datasets/robot]
+    (a folder of building folders, each of runs: CSV folders or bags)
     python benchmarks/fusion.py --select [--data ...]
 """
 
@@ -46,6 +47,7 @@ import sys
 import tempfile
 
 import numpy as np
+from wifi_place_recognition.cli.bag_to_csv import run_tables
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.coverage import COVERED_M
 from wifi_place_recognition.core.atomic import atomic_write
@@ -55,6 +57,7 @@ from wifi_place_recognition.core.filter.particles import FusionParams
 from wifi_place_recognition.core.filter.trajectory import (
     fuse_offline, odometry_alone, score)
 from wifi_place_recognition.core.locator import R95
+from wifi_place_recognition.data.bags import heard_aps, is_bag, read_bag
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.poses import read_poses
 
@@ -377,10 +380,45 @@ def summary_line(name, survey, figures):
 
 
 def site_runs(data):
-    """Yield (building, its runs) of every building folder of ``data``."""
+    """
+    Yield (building, its runs) of every building folder of ``data``.
+
+    A run is a folder of the shared runs' CSVs (``scans.csv``,
+    ``odom.csv``, ``poses.csv``), or a bag (a rosbag2 folder or file, a
+    ROS 1 bag: the package's topics, building 0, floor 0), exported to
+    those CSVs in a temporary folder first, as ``bag_to_csv`` writes them.
+    """
     for site in sorted(d for d in data.iterdir() if d.is_dir()):
-        yield site.name, [Run(r) for r in sorted(site.iterdir())
-                          if (r / 'odom.csv').exists()]
+        yield site.name, [Run(r) for r in run_folders(site)]
+
+
+def run_folders(site):
+    """
+    Return the run folders of a building folder, its bags exported.
+
+    The bags of a building are exported with the same AP columns, every
+    AP any of them heard (as the shared runs are).
+    """
+    folders = [r for r in sorted(site.iterdir()) if (r / 'odom.csv').exists()
+               or is_bag(r)]
+    bags = {r: read_bag(r) for r in folders if is_bag(r)}
+    aps = sorted({ap for b in bags.values() for ap in heard_aps(b)})
+    return [exported(r, site.name, bags[r], aps) if r in bags else r
+            for r in folders]
+
+
+_EXPORTS = []
+
+
+def exported(bag, site, recording, ap_ids):
+    """Return a folder with ``bag`` (its recording) as a run's CSVs."""
+    if not _EXPORTS:
+        _EXPORTS.append(tempfile.TemporaryDirectory())
+    folder = Path(_EXPORTS[0].name) / site / bag.name.split('.')[0]
+    folder.mkdir(parents=True)
+    for file, text in run_tables(recording, 0, 0, ap_ids).items():
+        (folder / file).write_text(text)
+    return folder
 
 
 def select(data, out):

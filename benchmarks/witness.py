@@ -71,7 +71,8 @@ from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.poses import read_poses
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from fusion import spliced_odometry, survey_holes  # noqa: E402
+from fusion import (run_folders, spliced_odometry,  # noqa: E402
+                    survey_holes)
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / 'benchmarks' / 'results'
@@ -450,8 +451,7 @@ def main():
         folder.mkdir(parents=True, exist_ok=True)
         cases = {}
         for site in sorted(d for d in args.data.iterdir() if d.is_dir()):
-            runs = [Run(r) for r in sorted(site.iterdir())
-                    if (r / 'odom.csv').exists()]
+            runs = [Run(r) for r in run_folders(site)]
             if len(runs) < 2:
                 continue
             models = {r.name: {k: train(r, [o for o in runs if o is not r],

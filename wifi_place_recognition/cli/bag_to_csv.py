@@ -72,9 +72,14 @@ def _rows(table):
     return 0 if table is None else len(table)
 
 
-def run_tables(recording, building, floor):
-    """Return {file name: CSV text} of a :class:`.Recording`."""
-    ap_ids, rssi = scan_matrix(recording)
+def run_tables(recording, building, floor, ap_ids=None):
+    """
+    Return {file name: CSV text} of a :class:`.Recording`.
+
+    ``ap_ids``: the AP columns (default: the APs the bag heard; the shared
+    runs of a building all have the building's).
+    """
+    ap_ids, rssi = scan_matrix(recording, ap_ids)
     stamps = np.array([s[0] for s in recording.scans])
     cells = np.where(np.isnan(rssi), NOT_DETECTED_MARKER, rssi)
     columns = [np.char.mod('%.6f', stamps)]

@@ -285,10 +285,20 @@ def pose_labels(poses, stamps):
     return xy, np.where(inside, yaw, np.nan)
 
 
-def scan_matrix(recording):
-    """Return (AP ids sorted, float32 RSSI (n, m), NaN = not heard)."""
-    ap_ids = tuple(sorted({ap for _, names, _ in recording.scans
-                           for ap in names}))
+def heard_aps(recording):
+    """Return the AP ids a recording's scans heard, sorted."""
+    return tuple(sorted({ap for _, names, _ in recording.scans
+                         for ap in names}))
+
+
+def scan_matrix(recording, ap_ids=None):
+    """
+    Return (AP ids, float32 RSSI (n, m), NaN = not heard).
+
+    ``ap_ids``: the columns (default: the APs heard, sorted); it must
+    hold every AP the scans heard.
+    """
+    ap_ids = heard_aps(recording) if ap_ids is None else tuple(ap_ids)
     mapper = ScanMapper(ap_ids)
     rssi = np.full((len(recording.scans), len(ap_ids)), np.nan, np.float32)
     for i, (_, names, values) in enumerate(recording.scans):
