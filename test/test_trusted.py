@@ -17,6 +17,8 @@ def verdict(stamp=100.5, pose=HERE, last_jump=None, witness='agrees',
 def test_a_confident_localiser_labels_the_scan_also_where_wifi_cannot_tell():
     assert verdict() is None
     assert verdict(witness='cannot_tell') is None
+    # evidence gathering against the localiser: not yet lost, not trusted
+    assert verdict(witness='disagrees') == 'disagrees'
 
 
 def test_nothing_is_trusted_while_lost_waiting_or_uncertain():
@@ -31,7 +33,7 @@ def test_nothing_is_trusted_while_lost_waiting_or_uncertain():
     assert verdict(last_jump=100.5 - P.settle_s + 0.1) == 'jumped'
     assert verdict(last_jump=100.5 - P.settle_s - 0.1) is None
     assert verdict(last_jump=101.0) == 'jumped'   # since the scan
-    assert set(REASONS) == {'no_place', 'witness_waiting', 'lost',
+    assert set(REASONS) == {'no_place', 'witness_waiting', 'lost', 'disagrees',
                             'no_pose', 'uncertain', 'jumped'}
 
 

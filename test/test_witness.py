@@ -14,7 +14,8 @@ import math
 import numpy as np
 import pytest
 from wifi_place_recognition.core.filter.particles import UNKNOWN_VARIANCE
-from wifi_place_recognition.core.witness import (AGREES, CANNOT_TELL, LOST,
+from wifi_place_recognition.core.witness import (AGREES, CANNOT_TELL,
+                                                 DISAGREES, LOST,
                                                  WAITING, Witness)
 from wifi_place_recognition.core.witness_inputs import pose_problem
 from wifi_place_recognition.core.witness_offline import judge_offline
@@ -293,6 +294,5 @@ def test_wifi_that_disagrees_before_the_alarm_does_not_agree():
         states.append(w.state)
         whys.append(w.why)
     assert AGREES not in states, list(zip(states, whys))
-    assert CANNOT_TELL in states and states[-1] == LOST
-    doubt = whys[states.index(CANNOT_TELL)]
-    assert doubt.startswith('WiFi disagrees so far'), whys
+    assert DISAGREES in states and states[-1] == LOST
+    assert whys[states.index(DISAGREES)].endswith('of the alarm'), whys

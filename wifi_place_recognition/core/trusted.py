@@ -18,13 +18,14 @@ the current place; with none yet, nothing is trusted.
 from dataclasses import dataclass
 import math
 
-from .witness import AGREES, CANNOT_TELL, LOST
+from .witness import AGREES, CANNOT_TELL, DISAGREES, LOST
 
 #: Why a scan was not trusted, and what that means.
 REASONS = {
     'no_place': 'no current place (building, floor) yet',
     'witness_waiting': 'the WiFi witness has not started',
     'lost': 'the WiFi witness says the localiser is lost',
+    'disagrees': 'the WiFi witness disagrees with the localiser so far',
     'no_pose': 'no localiser pose near the scan in time',
     'uncertain': 'the localiser is not sure of its pose',
     'jumped': 'the localiser jumped a moment ago',
@@ -87,7 +88,8 @@ def untrusted(stamp, pose, last_jump, witness, place, params):
     if place is None:
         return 'no_place'
     if witness not in (AGREES, CANNOT_TELL):
-        return 'lost' if witness == LOST else 'witness_waiting'
+        return {LOST: 'lost', DISAGREES: 'disagrees'}.get(
+            witness, 'witness_waiting')
     if pose is None or abs(pose.stamp - stamp) > params.max_pose_age:
         return 'no_pose'
     if not pose.sd <= params.max_sd:

@@ -75,8 +75,8 @@ from .witness_testimony import (covered, fused_distance, scan_distance,
 #: Recent scans: while most of them do not testify, nor does the fused pose.
 RECENT_SCANS = 5
 #: The states of :attr:`Witness.state`.
-WAITING, AGREES, CANNOT_TELL, LOST = 'waiting', 'agrees', 'cannot_tell', \
-    'lost'
+WAITING, AGREES, DISAGREES, CANNOT_TELL, LOST = (
+    'waiting', 'agrees', 'disagrees', 'cannot_tell', 'lost')
 
 
 @dataclass
@@ -187,14 +187,19 @@ class Witness:
 
     @property
     def state(self):
-        """Return the state: WAITING, AGREES, CANNOT_TELL or LOST."""
+        """
+        Return the state: WAITING, AGREES, DISAGREES, CANNOT_TELL or LOST.
+
+        DISAGREES: WiFi compared recently and evidence is gathering, not
+        yet at the alarm (the localiser may be going wrong).
+        """
         if self.ok is None:
             return WAITING
         if self.ok is False:
             return LOST
         if not self._recent_testimony():
             return CANNOT_TELL
-        return AGREES if self.evidence.level == 0 else CANNOT_TELL
+        return AGREES if self.evidence.level == 0 else DISAGREES
 
     @property
     def why(self):
@@ -209,8 +214,8 @@ class Witness:
             return self.testified[witness][1]
         if state == AGREES:
             return ''
-        if self._recent_testimony():    # disagreeing, not yet lost
-            return f'WiFi disagrees so far ({self.score:.0%} of the alarm)'
+        if state == DISAGREES:
+            return f'{self.score:.0%} of the alarm'
         if self.last is None:
             return 'no WiFi pose or scan yet'
         if not self.last.testified:

@@ -6,11 +6,12 @@ Subscribes the localiser's pose (``localizer_topic``, e.g. AMCL's
 answers (``place_topic``: each scan's own position and sigma), and feeds
 them to :class:`.core.witness.Witness`, which judges whether they agree
 (see there). Publishes its state on the latched ``~/status``
-(``std_msgs/String``: ``agrees``, ``cannot_tell``, ``lost``, or
-``waiting`` before the localiser's first pose) and the verdict on the
-latched ``~/localization_ok`` (``std_msgs/Bool``: true while the
-localiser is not known to be lost, agrees or cannot tell; false when lost
-or before its first pose), each once per change and logged; a status on
+(``std_msgs/String``: ``agrees``, ``disagrees`` (evidence gathering,
+not yet lost), ``cannot_tell``, ``lost``, or ``waiting`` before the
+localiser's first pose) and the verdict on the latched
+``~/localization_ok`` (``std_msgs/Bool``: true while the localiser is not
+known to be lost: agrees, disagrees or cannot tell; false when lost or
+before its first pose), each once per change and logged; a status on
 ``/diagnostics`` every second and at once on a change of state; and with
 ``initial_pose_on_lost`` the fused pose (as classifier_node published it:
 its frame, pose and covariance) on ``initialpose`` at start-up and when
@@ -43,7 +44,8 @@ from std_msgs.msg import Bool, String
 
 from ..core.artifact import load_model, ModelFileError
 from ..core.resources import default_model_path
-from ..core.witness import AGREES, CANNOT_TELL, LOST, WAITING, Witness
+from ..core.witness import (AGREES, CANNOT_TELL, DISAGREES, LOST, WAITING,
+                            Witness)
 from .classifier_parameters import check_frame
 from .messages import key_value as _kv, pose_problem, seconds, yaw_of
 from .monitor_parameters import declare, WITNESS_FIELDS, witness_params
@@ -59,6 +61,7 @@ BAD_REASONS = ('not_finite', 'not_unit_quaternion', 'covariance',
 #: Each state's /diagnostics level and message (then ": why").
 STATES = {WAITING: (DiagnosticStatus.WARN, 'no localiser pose yet'),
           AGREES: (DiagnosticStatus.OK, 'localiser agrees with WiFi'),
+          DISAGREES: (DiagnosticStatus.WARN, 'WiFi disagrees so far'),
           CANNOT_TELL: (DiagnosticStatus.WARN, 'WiFi cannot tell'),
           LOST: (DiagnosticStatus.ERROR, 'localiser lost')}
 
