@@ -5,10 +5,10 @@ A robot that knows where it is can survey as it works: each WiFi scan
 labelled with the localiser's pose (AMCL's) is a survey scan, but only
 while that pose can be trusted, for a poisoned survey is worse than a thin
 one. :func:`untrusted` says why a scan is not, or None: the localiser's
-pose nearest the scan in time must be at most ``max_pose_age`` seconds
-from it, its x and y standard deviations at most ``max_sd`` metres, and
-no jump of the localiser (:func:`is_jump`) in the ``settle_s`` seconds
-before the scan or since; the WiFi witness (localization_monitor's state)
+poses must label the scan by the labelling rule (:mod:`.pose_label`,
+within ``max_pose_age`` seconds), their x and y standard deviations be
+at most ``max_sd`` metres, and no jump of the localiser (:func:`is_jump`)
+be in the ``settle_s`` seconds before the scan or since; the WiFi witness (localization_monitor's state)
 must not say ``lost``, and must have started (not ``waiting``). Its
 ``cannot_tell`` does not block: inside a survey hole WiFi cannot testify,
 and that is where recording matters. The building and floor come from
@@ -18,6 +18,7 @@ the current place; with none yet, nothing is trusted.
 from dataclasses import dataclass
 import math
 
+from .pose_label import MAX_POSE_AGE
 from .witness import AGREES, CANNOT_TELL, DISAGREES, LOST
 
 #: Why a scan was not trusted, and what that means.
@@ -40,12 +41,12 @@ class TrustParams:
     jump_m: float = 0.5         # m beyond what max_speed covers: a jump
     max_speed: float = 1.0      # m/s the robot can drive
     settle_s: float = 5.0       # s after a jump: nothing trusted
-    max_pose_age: float = 2.0   # s between a scan and its pose
+    max_pose_age: float = MAX_POSE_AGE  # s between a scan and its poses
 
 
 @dataclass(frozen=True)
 class LocaliserPose:
-    """One pose of the localiser: stamp (s), x, y (m), yaw (rad), frame."""
+    """A pose of the localiser: stamp (s), x, y (m), yaw (rad), frame, sd."""
 
     stamp: float
     x: float
@@ -79,8 +80,9 @@ def untrusted(stamp, pose, last_jump, witness, place, params):
     """
     Return why the scan taken at ``stamp`` (s) is not trusted, or None.
 
-    ``pose``: the localiser's :class:`LocaliserPose` nearest the scan in
-    time (None: none yet); ``last_jump``: the stamp of its newest jump
+    ``pose``: the localiser's :class:`LocaliserPose` labelling the scan by
+    :mod:`.pose_label` (its sd the larger of the poses it comes from;
+    None: no pose labels it); ``last_jump``: the stamp of its newest jump
     (None: none); ``witness``: the WiFi witness's state (None: not heard
     yet); ``place``: the current (building, floor) or None. The reason is
     a key of :data:`REASONS`.
