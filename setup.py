@@ -15,6 +15,7 @@ console_scripts = [
     'replay_run = wifi_place_recognition.cli.replay_run:main',
     'survey_gaps = wifi_place_recognition.cli.survey_gaps:main',
     'bag_to_csv = wifi_place_recognition.cli.bag_to_csv:main',
+    'update_model = wifi_place_recognition.cli.update_model:main',
     'wifi_scanner_node = '
     'wifi_place_recognition.ros.executables:wifi_scanner_node',
     'record_fingerprints = '

@@ -51,7 +51,8 @@ class ModelStore:
         except (OSError, UnicodeDecodeError) as exc:
             raise StoreError(f'{self.folder / HISTORY}: cannot read it '
                              f'({exc})') from None
-        missing = [n for n in names if not (self.folder / f'{n}.npz').is_file()]
+        missing = [n for n in names
+                   if not (self.folder / f'{n}.npz').is_file()]
         if missing:
             raise StoreError(f'{self.folder / HISTORY}: lists '
                              f'{", ".join(missing)}, not in the folder')

@@ -1,0 +1,160 @@
+"""
+``update_model`` on a small building: a better candidate put in use, a
+worse one refused, nothing written on a failure, a rollback.
+
+The survey leaves a hole (x > 25 m of a 40 m floor) that the recorded
+scans cover; while recording, three APs of the survey are gone and three
+new ones are heard.
+"""
+
+import json
+
+from conftest import FAST, mac, python_module, run
+import numpy as np
+import pytest
+from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.core.scan import normalize_ap_id
+from wifi_place_recognition.data.recording import FingerprintLog
+
+APS = 33                # 0-29 in the survey; 0-2 gone and 30-32 new later
+SURVEYED, RECORDED = range(30), range(3, 33)
+TRAIN = [*FAST, '--epochs', '20']
+
+
+def _building(seed=0):
+    rng = np.random.default_rng(seed)
+    return rng.uniform(0, 40, (APS, 2)), rng.integers(0, 2, APS)
+
+
+def _readings(building, xy, floor, aps, rng):
+    """Return {AP: dBm} heard at ``xy`` on ``floor`` (path loss)."""
+    ap_xy, ap_floor = building
+    aps = np.asarray(aps)
+    d = np.linalg.norm(ap_xy[aps] - xy, axis=1) + 1.0
+    rssi = -30 - 25 * np.log10(d) - 12 * (ap_floor[aps] != floor) + \
+        rng.normal(0, 2, len(aps))
+    return {mac(i): round(v) for i, v in zip(aps, rssi) if v >= -85}
+
+
+def _survey(path, building, shuffled=False, per_floor=150):
+    """Write the survey (x <= 25 m); ``shuffled``: its labels permuted."""
+    rng = np.random.default_rng(1)
+    rows = []
+    for floor in (0, 1):
+        for s in range(per_floor):
+            xy = rng.uniform((0, 0), (25, 40))
+            rows.append((_readings(building, xy, floor, SURVEYED, rng), xy,
+                         floor, s % 4))
+    labels = [(xy, floor) for _, xy, floor, _ in rows]
+    if shuffled:
+        labels = [labels[i] for i in rng.permutation(len(labels))]
+    lines = [','.join([mac(i) for i in SURVEYED]
+                      + ['X', 'Y', 'FLOOR', 'BUILDINGID', 'PHONEID'])]
+    for (heard, _, _, phone), (xy, floor) in zip(rows, labels):
+        cells = [str(heard.get(mac(i), 100)) for i in SURVEYED]
+        lines.append(','.join(cells + [f'{xy[0]:.2f}', f'{xy[1]:.2f}',
+                                       str(floor), '0', str(phone)]))
+    path.write_text('\n'.join(lines) + '\n')
+    return path
+
+
+def _recorded(path, building, scans=300):
+    """Write what trusted_recorder would: the whole floors, 2 h, new APs."""
+    rng = np.random.default_rng(2)
+    log = FingerprintLog(path, positions=True)
+    for k in range(scans):
+        xy, floor = rng.uniform(0, 40, 2), k % 2
+        heard = _readings(building, xy, floor, RECORDED, rng)
+        log.add(list(heard), list(heard.values()), 0, floor, 24.0 * k,
+                (xy[0], xy[1], 0.0, 'map'))
+    return path
+
+
+@pytest.fixture(scope='module')
+def site(tmp_path_factory):
+    """Return a folder: survey, poisoned survey, recording, model in use."""
+    folder = tmp_path_factory.mktemp('site')
+    building = _building()
+    survey = _survey(folder / 'survey.csv', building)
+    _survey(folder / 'poisoned.csv', building, shuffled=True)
+    _recorded(folder / 'recorded.csv', building)
+    result = run(python_module('cli.train_model', '--data', survey, '-o',
+                               folder / 'in_use.npz', *TRAIN))
+    assert result.returncode == 0, result.stderr
+    return folder
+
+
+def _update(site, models, *args):
+    return run(python_module('cli.update_model', '--folder', models, *args,
+                             *TRAIN), timeout=600)
+
+
+def _history(models):
+    return (models / 'current').read_text().split()
+
+
+def _listing(folder):
+    return sorted((p.name, p.read_bytes()) for p in folder.iterdir())
+
+
+def test_update_refuse_fail_and_roll_back(site, tmp_path):
+    models = tmp_path / 'models'
+    models.mkdir()
+    recorded = site / 'recorded.csv'
+    # a candidate that fills the hole: kept and put in use
+    result = _update(site, models, '--model', site / 'in_use.npz',
+                     '--survey', site / 'survey.csv', '--recorded', recorded,
+                     '--ap-window', '1')
+    assert result.returncode == 0, result.stderr
+    adopted, first = _history(models)
+    assert (models / f'{adopted}.npz').read_bytes() == \
+        (site / 'in_use.npz').read_bytes()
+    assert (models / 'current.npz').resolve() == models / f'{first}.npz'
+    for node in ('classifier_node', 'localization_monitor'):
+        assert f'ros2 param set /{node} model_path {models / first}.npz' \
+            in result.stdout.splitlines(), result.stdout
+    report = json.loads((models / f'{first}.json').read_text())
+    assert report['decision'] == 'put in use', report
+    assert report['protocol']['held_out_scans'] == 60
+    assert report['candidate']['training']['recorded_scans'] == 240
+    assert report['candidate']['position_mean_error_m'] < \
+        report['in_use']['position_mean_error_m'], report
+    aps = report['access_points']
+    assert [s['ap'] for s in aps['silent']] == [mac(i) for i in range(3)]
+    assert aps['new'] == [mac(i).lower() for i in range(30, 33)]
+    model = load_model(models / 'current.npz')
+    assert {normalize_ap_id(ap) for ap in model.ap_ids} == \
+        {normalize_ap_id(mac(i)) for i in RECORDED}
+    # a candidate from a survey with its labels shuffled: refused
+    before = _history(models)
+    result = _update(site, models, '--survey', site / 'poisoned.csv',
+                     '--recorded', recorded, '--ap-window', '1')
+    assert result.returncode == 1, result.stderr
+    last = result.stderr.splitlines()[-1]
+    assert last.startswith('refused: worse than the model in use on the '
+                           'held-out scans: '), result.stderr
+    assert _history(models) == before
+    refused = sorted(models.glob('*-refused.json'))
+    assert len(refused) == 1
+    assert json.loads(refused[0].read_text())['decision'] == 'refused'
+    # a failure (unreadable recording): one line, nothing written
+    before = _listing(models)
+    (tmp_path / 'torn.csv').write_text('BUILDINGID,FLOOR,TIMESTAMP\n0,x\n')
+    result = _update(site, models, '--survey', site / 'survey.csv',
+                     '--recorded', tmp_path / 'torn.csv')
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.splitlines()[-1].startswith('error: '), \
+        result.stderr
+    assert _listing(models) == before
+    # roll back: the model in use before the update, in use again
+    result = run(python_module('cli.update_model', '--folder', models,
+                               '--rollback'))
+    assert result.returncode == 0, result.stderr
+    assert _history(models) == [adopted]
+    assert (models / 'current.npz').read_bytes() == \
+        (site / 'in_use.npz').read_bytes()
+    assert f'model_path {models / adopted}.npz' in result.stdout
+    result = run(python_module('cli.update_model', '--folder', models,
+                               '--rollback'))
+    assert result.returncode == 2
+    assert 'nothing to roll back to' in result.stderr

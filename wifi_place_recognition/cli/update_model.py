@@ -1,0 +1,283 @@
+"""
+``update_model``: a candidate from the survey plus the recorded scans, checked.
+
+At low priority (``--nice``, torch on ``--threads``), the survey and the
+scans the robot recorded (trusted_recorder's CSVs) train a candidate with
+the package's trainer; the newest share of the recorded scans is held out
+of its training and scores it beside the model in use
+(:mod:`..core.update_check`). A candidate not worse is kept in the models
+folder and put in use (:mod:`..core.model_store`), else refused with its
+reason (exit 1); either way the report says what was compared, how, and
+which APs came and went. ``--rollback`` puts the previous model back.
+"""
+
+import argparse
+from dataclasses import fields
+import os
+from pathlib import Path
+import resource
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from ..core.artifact import load_model, save_model
+from ..core.atomic import probe_folder
+from ..core.evaluation import evaluate
+from ..core.model_store import ModelStore, StoreError
+from ..core.scan import normalize_ap_id, ScanMapper
+from ..core.update_check import (ap_changes, HOLDOUT_SHARE, MIN_HELD_OUT,
+                                 newest, scores, Tolerance, verdict)
+from ..data.columns import distinct_aps, TIME
+from ..data.fingerprints import Fingerprints
+from ..training.config import TrainConfig
+from .common import add_data_arguments, data_options, main_wrapper, read_data
+from .train_model import _layers
+
+REFUSED = 1
+NODES = ('classifier_node', 'localization_monitor')
+
+
+def build_parser():
+    """Return the argument parser."""
+    p = argparse.ArgumentParser(
+        allow_abbrev=False, prog='update_model',
+        description='Train a candidate model from the survey plus the '
+                    'recorded scans at low priority, check it against the '
+                    'model in use on the newest recorded scans (held out), '
+                    'keep and put in use the one not worse; or roll back.')
+    p.add_argument('--folder', type=Path, required=True,
+                   help='the models folder: every model put in use with its '
+                        'report, current (the order they were put in use), '
+                        'current.npz (a link to the one in use)')
+    p.add_argument('--rollback', action='store_true',
+                   help='put the previous model back in use and stop')
+    p.add_argument('--survey', nargs='+', metavar='PATH',
+                   help='the survey: fingerprint CSV(s) or folder(s)')
+    p.add_argument('--recorded', nargs='+', metavar='PATH',
+                   help='the scans recorded while the localiser was '
+                        'trusted (trusted_recorder\'s CSVs, with times)')
+    p.add_argument('--model', type=Path,
+                   help='the model in use, for a folder that has none yet '
+                        '(kept there first when a candidate is put in use)')
+    p.add_argument('--holdout', type=float, default=HOLDOUT_SHARE,
+                   help='share of the recorded scans held out, the newest '
+                        '(default: %(default)s)')
+    tolerance = Tolerance()
+    p.add_argument('--tolerance-accuracy', type=float,
+                   default=tolerance.accuracy,
+                   help='building+floor accuracy the candidate may lose '
+                        '(default: %(default)s)')
+    p.add_argument('--tolerance-position', type=float,
+                   default=tolerance.position_m, metavar='METRES',
+                   help='mean position error it may add (default: '
+                        '%(default)s m)')
+    p.add_argument('--ap-window', type=float, default=168.0,
+                   metavar='HOURS',
+                   help='an AP of the model in use not heard in the last '
+                        'HOURS of the recording is silent: left out of the '
+                        'candidate (default: %(default)s, a week)')
+    p.add_argument('--keep-aps', action='store_true',
+                   help='keep silent APs in the candidate (still reported)')
+    p.add_argument('--nice', type=int, default=10,
+                   help='niceness added to this process (default: '
+                        '%(default)s)')
+    p.add_argument('--quiet', action='store_true',
+                   help='no per-epoch progress lines')
+    add_data_arguments(p, training=True)
+    defaults = TrainConfig(threads=1)
+    g = p.add_argument_group('model and training (as train_model\'s, but '
+                             'torch on one thread by default)')
+    for f in fields(TrainConfig):
+        default = getattr(defaults, f.name)
+        flag = '--' + f.name.replace('_', '-')
+        if isinstance(default, bool):
+            g.add_argument(flag, action=argparse.BooleanOptionalAction,
+                           default=default)
+        elif isinstance(default, tuple):
+            g.add_argument(flag, type=_layers, default=default,
+                           metavar='N,N,...',
+                           help=f'default: {",".join(map(str, default))}')
+        else:
+            g.add_argument(flag, type=type(default), default=default,
+                           help=f'default: {default}')
+    return p
+
+
+def together(survey, recorded, leave_out):
+    """
+    Return the survey and the recorded scans as one :class:`Fingerprints`.
+
+    The AP columns of both, less ``leave_out`` (identifiers) and those no
+    scan heard; each file stays a walk.
+    """
+    if (survey.position is None) != (recorded.position is None):
+        raise ValueError('the survey and the recorded scans must both have '
+                         'positions (X, Y) or both have none')
+    parts = (survey, recorded)
+    gone = {normalize_ap_id(ap) for ap in leave_out}
+    ids = distinct_aps(ap for p in parts for ap in p.ap_ids
+                       if normalize_ap_id(ap) not in gone)
+    mapper = ScanMapper(ids)
+    rssi = np.concatenate([mapper.map_rows(p.ap_ids, p.rssi) for p in parts])
+    heard = np.isfinite(rssi).any(axis=0)
+    walk = np.concatenate([p.walk if p.walk is not None else
+                           np.full(len(p), p.source) for p in parts])
+    position = None if survey.position is None else \
+        np.concatenate([p.position for p in parts])
+    return Fingerprints(
+        tuple(ap for ap, h in zip(ids, heard) if h), rssi[:, heard],
+        np.concatenate([p.building for p in parts]),
+        np.concatenate([p.floor for p in parts]), {},
+        f'{survey.source} + {recorded.source}',
+        sha256=f'{survey.sha256}+{recorded.sha256}', walk=walk,
+        position=position, position_columns=survey.position_columns)
+
+
+def _param_lines(path):
+    return [f'ros2 param set /{node} model_path {path}' for node in NODES]
+
+
+def _rollback(store):
+    now, undone = store.rollback()
+    print(f'rolled back: {now.name} in use again ({undone.name} kept); '
+          f'for the running nodes:')
+    print('\n'.join(_param_lines(now)))
+    return 0
+
+
+def _in_use(store, given):
+    current = store.current()
+    if current is not None and given is not None and \
+            os.path.realpath(given) != os.path.realpath(current):
+        raise ValueError(f'--model {given}: the folder has its model in use '
+                         f'({current}); --model is for a folder without one')
+    if current is None and given is None:
+        raise ValueError(f'the folder {store.folder} has no model yet: '
+                         f'give the model in use with --model')
+    return current or given
+
+
+def _log(args):
+    def log(line):
+        if not args.quiet:
+            print(line, file=sys.stderr, flush=True)
+    return log
+
+
+@main_wrapper
+def main(argv=None):
+    """Build, check, keep or refuse a candidate; or roll back."""
+    args = build_parser().parse_args(argv)
+    try:
+        store = ModelStore(args.folder)
+        if args.rollback:
+            return _rollback(store)
+        if not (args.survey and args.recorded):
+            raise ValueError('give --survey and --recorded (or --rollback)')
+        probe_folder(args.folder / 'current')
+        if not 0.0 < args.holdout < 1.0:
+            raise ValueError(f'--holdout {args.holdout}: must be between 0 '
+                             f'and 1')
+        return _update(args, store)
+    except StoreError as exc:
+        raise ValueError(str(exc)) from None
+
+
+def _update(args, store):
+    os.nice(args.nice)
+    start = time.monotonic()
+    config = TrainConfig(**{f.name: getattr(args, f.name)
+                            for f in fields(TrainConfig)})
+    in_use_path = _in_use(store, args.model)
+    in_use = load_model(in_use_path)
+    data = data_options(args)
+    survey = read_data(args.survey, data, 'survey',
+                       small_classes=args.small_classes)
+    recorded = read_data(args.recorded, data, 'recorded scans',
+                         small_classes='keep')
+    stamps = recorded.meta.get(TIME)
+    held = newest(stamps, len(recorded), args.holdout)
+    if held.sum() < MIN_HELD_OUT:
+        raise ValueError(f'--recorded: {len(recorded)} scans, {held.sum()} '
+                         f'held out: at least {MIN_HELD_OUT} are needed to '
+                         f'judge a candidate; record more')
+    changes = ap_changes(in_use.ap_ids, recorded.ap_ids, recorded.rssi,
+                         stamps, args.ap_window * 3600.0)
+    leave_out = [] if args.keep_aps else [s['ap'] for s in changes['silent']]
+    fp = together(survey, recorded.subset(~held), leave_out)
+    print(fp.summary(), file=sys.stderr, flush=True)
+    candidate, _, training = _trainer()(fp, config, _log(args))
+    test = recorded.subset(held)
+    figures = {'in_use': scores(evaluate(in_use, test)),
+               'candidate': scores(evaluate(candidate, test))}
+    tolerance = Tolerance(args.tolerance_accuracy, args.tolerance_position)
+    ok, reason = verdict(figures['in_use'], figures['candidate'], tolerance)
+    used = resource.getrusage(resource.RUSAGE_SELF)
+    report = {
+        'decision': 'put in use' if ok else 'refused', 'reason': reason,
+        'created': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
+        'protocol': {
+            'held_out': f'the newest {args.holdout:g} of the recorded scans '
+                        f'by {"TIMESTAMP" if stamps is not None else "row"}'
+                        f', not trained on',
+            'held_out_scans': int(held.sum()),
+            'scores': 'core/evaluation.py on the held-out scans, each model '
+                      'mapping their APs as the node does',
+            'tolerance': {'building_floor_accuracy': tolerance.accuracy,
+                          'position_mean_error_m': tolerance.position_m}},
+        'in_use': {'file': str(in_use_path), **figures['in_use']},
+        'candidate': {**figures['candidate'], 'training': {
+            'survey': survey.source, 'survey_scans': len(survey),
+            'recorded': recorded.source,
+            'recorded_scans': len(fp) - len(survey),
+            'aps': len(candidate.ap_ids), 'epochs': training.epochs,
+            'seconds': round(training.seconds, 1)}},
+        'access_points': {**changes, 'left_out': leave_out},
+        'cost': {'seconds': round(time.monotonic() - start, 1),
+                 'cpu_seconds': round(used.ru_utime + used.ru_stime, 1),
+                 'max_rss_mib': round(used.ru_maxrss / 1024, 1),
+                 'nice': os.nice(0), 'torch_threads': config.threads}}
+    print(f'held out {held.sum()} recorded scans: in use '
+          f'{_line(figures["in_use"])}; candidate '
+          f'{_line(figures["candidate"])}; APs: {len(changes["silent"])} '
+          f'silent, {len(changes["new"])} new', file=sys.stderr)
+    if not ok:
+        path = store.refused(report)
+        print(f'refused: {reason} (report {path})', file=sys.stderr)
+        return REFUSED
+    if store.current() is None:
+        store.install(in_use_path, {'decision': 'adopted',
+                                    'reason': 'the model in use before the '
+                                              'first update',
+                                    'source': str(in_use_path)})
+    with tempfile.TemporaryDirectory(dir=args.folder,
+                                     prefix='.candidate.') as tmp:
+        save_model(candidate, Path(tmp) / 'candidate.npz')
+        path = store.install(Path(tmp) / 'candidate.npz', report)
+    print(f'put in use: {path} (report {path.with_suffix(".json").name}); '
+          f'for the running nodes:')
+    print('\n'.join(_param_lines(path)))
+    return 0
+
+
+def _line(figures):
+    text = f'building+floor {figures["building_floor_accuracy"]:.4f}'
+    if 'position_mean_error_m' in figures:
+        text += f', position {figures["position_mean_error_m"]:.2f} m'
+    return text
+
+
+def _trainer():
+    """Return the torch trainer; a clear error where torch is missing."""
+    try:
+        from ..training.trainer import train
+    except ImportError as exc:
+        raise ValueError(f'training needs torch ({exc}); install the '
+                         f'package\'s [train] extra') from None
+    return train
+
+
+if __name__ == '__main__':
+    sys.exit(main())
