@@ -241,8 +241,8 @@ def test_recorder_labels_scans_with_a_fresh_pose_and_skips_stale_ones(
     progress = Progress(ros, 'pose_rec')
     recorder = NodeProcess(tmp_path, python_module(
         'ros.record_fingerprints', '--ros-args', '-p', f'output:={csv_path}',
-        '-p', 'building:=0', '-p', 'floor:=1', '-p', 'pose_topic:=/amcl_pose'),
-        'pose_rec')
+        '-p', 'building:=0', '-p', 'floor:=1', '-p', 'pose_topic:=/amcl_pose',
+        '-p', 'max_pose_age:=2.0'), 'pose_rec')
     client = Client(ros, 'pose_rec')
     # AMCL's QoS, and a best-effort volatile source: both must connect.
     amcl = ros.create_publisher(PoseWithCovarianceStamped, '/amcl_pose',
@@ -266,22 +266,25 @@ def test_recorder_labels_scans_with_a_fresh_pose_and_skips_stale_ones(
                           other.get_subscription_count() and
                           client.params.service_is_ready() and
                           progress.values, 60, ros), recorder.stop()[1]
-        scan(1000.0, False)                         # no pose yet
-        pose(amcl, 1000.0, 1.5, -2.25, 'map')
+        # Held until a pose after it, or a stamp max_pose_age later:
+        scan(990.0, False)
+        scan(993.0, False)      # releases the first: no pose yet
+        pose(amcl, 1000.0, 1.5, -2.25, 'map')     # 993.0: 7 s before it
         pose(other, 1010.0, 7.0, 8.0, 'map_b0_f1')
         pose(amcl, 1005.0, 0.0, 0.0, '')            # no frame: rejected
         pose(other, 1012.5, math.nan, 0.0, 'map')   # not finite: rejected
         scan(1000.5, True)      # labelled with the pose of 1000.0
         scan(1005.0, False)     # 5 s from both
         scan(1009.0, True)      # the pose of 1010.0, 1 s newer
-        scan(1012.5, False)     # the nearest pose is 2.5 s older
         scan(1007.5, False)     # the nearest pose is 2.5 s newer
         assert client.set_param('max_pose_age', 3.0).successful
         assert not client.set_param('max_pose_age', -1.0).successful
         scan(1007.25, True)     # 2.75 s: now fresh enough
-        # Zero stamps: the time the recorder takes the message.
+        # Zero stamps: the time the recorder takes the message; the scan
+        # waits for the pose after it.
+        scan(0.0, False)
         pose(amcl, time.time(), 3.0, 4.0, 'map')
-        scan(0.0, True)
+        assert progress.count('scans/B0F1') == 4, progress.values
     finally:
         values = progress.values
         for entity in (amcl, other):
@@ -305,6 +308,46 @@ def test_recorder_labels_scans_with_a_fresh_pose_and_skips_stale_ones(
     assert fp.meta['FRAME'].tolist() == ['map', 'map_b0_f1', 'map_b0_f1',
                                          'map']
     assert fp.meta['TIMESTAMP'].tolist() == [1000.5, 1009.0, 1007.25, 0.0]
+
+
+def test_recorder_interpolates_between_poses_and_writes_held_scans(
+        ros, tmp_path):
+    csv_path = tmp_path / 'survey.csv'
+    progress = Progress(ros, 'interp_rec')
+    recorder = NodeProcess(tmp_path, python_module(
+        'ros.record_fingerprints', '--ros-args', '-p', f'output:={csv_path}',
+        '-p', 'building:=0', '-p', 'floor:=1', '-p', 'pose_topic:=/amcl_pose'),
+        'interp_rec')
+    client = Client(ros, 'interp_rec')
+    amcl = ros.create_publisher(PoseWithCovarianceStamped, '/amcl_pose',
+                                AMCL_QOS)
+    try:
+        assert wait_until(lambda: client.pub.get_subscription_count() and
+                          amcl.get_subscription_count() and
+                          progress.values, 60, ros), recorder.stop()[1]
+        progress.deliver(lambda: amcl.publish(_pose(2000.0, 0.0, 0.0, 'map')),
+                         'poses_received')
+        # a scan before the next pose waits for it, then is interpolated
+        progress.deliver(lambda: client.pub.publish(_scan(2000.5)),
+                         'scans_received')
+        assert progress.count('scans_held') == 1, progress.values
+        progress.deliver(lambda: amcl.publish(_pose(2002.0, 2.0, 4.0, 'map')),
+                         'poses_received')
+        assert progress.count('scans/B0F1') == 1, progress.values
+        # the robot stands still (no pose after): held until the stop
+        progress.deliver(lambda: client.pub.publish(_scan(2003.0)),
+                         'scans_received')
+        assert progress.count('scans_held') == 1, progress.values
+    finally:
+        ros.destroy_publisher(amcl)
+        ros.destroy_subscription(progress.sub)
+        client.close()
+        code, log = recorder.stop()
+    assert code == 0 and 'Traceback' not in log, log
+    fp = read_fingerprints(csv_path)
+    # interpolated a quarter of the way; then the nearest, 1 s older
+    np.testing.assert_array_equal(fp.position, [[0.5, 1.0], [2.0, 4.0]])
+    assert fp.meta['TIMESTAMP'].tolist() == [2000.5, 2003.0]
 
 
 @pytest.mark.parametrize('positions, pose_topic, problem', [

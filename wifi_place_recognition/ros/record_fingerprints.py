@@ -17,11 +17,15 @@ every scan and every second). Those still waiting
 at shutdown go to a new file in the temporary folder (or the home folder),
 which the log names.
 
-With ``pose_topic`` (e.g. ``/amcl_pose``), each scan also gets the x, y,
-yaw and frame of the pose nearest to it in time (scan and pose
-``header.stamp``; a zero stamp means the time the node takes the message),
-if that pose is at most ``max_pose_age`` seconds older or newer; other
-scans are counted and skipped. A file of an earlier recorder, without
+With ``pose_topic`` (e.g. ``/amcl_pose``), each scan also gets an x, y,
+yaw and frame by the labelling rule (:mod:`.core.pose_label`, scan and
+pose ``header.stamp``; a zero stamp means the time the node takes the
+message): interpolated between the poses just before and after it when
+both are within ``max_pose_age`` seconds, else the nearest within it;
+scans with neither are counted and skipped. A scan is therefore held
+until a pose at or after its stamp arrives, or a stamp more than
+``max_pose_age`` past it; those held at shutdown are labelled with the
+poses there are, and written. A file of an earlier recorder, without
 ``YAW``, goes on without it (logged).
 
 With ``odom_topic`` (``nav_msgs/Odometry``), every odometry pose is kept
@@ -41,7 +45,7 @@ sensor-data ones; parameters can override its reliability and durability.
 The odometry subscription is the same, with a deeper queue.
 """
 
-from collections import Counter, deque
+from collections import Counter
 import copy
 from pathlib import Path
 import sys
@@ -55,6 +59,7 @@ from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data,
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
+from ..core.pose_label import blend, HeldScans, Pose
 from .kept_files import KeptFiles
 from .messages import pose_problem, seconds, stamp_time, yaw_of
 from .node_interface import declare
@@ -74,7 +79,7 @@ ODOM_QOS = copy.copy(POSE_QOS)
 ODOM_QOS.depth = 1000
 QOS_OVERRIDES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
                  QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
-#: Poses kept to label scans that waited in the queue.
+#: Poses kept to label the scans held or waiting in the queue.
 POSE_HISTORY = 500
 
 
@@ -114,7 +119,7 @@ class RecordFingerprintsNode(Node):
         if pose_topic:
             self.counts.update(scans_no_fresh_pose=0, poses_received=0,
                                poses_rejected=0)
-            self._poses = deque(maxlen=POSE_HISTORY)
+            self._poses = HeldScans(POSE_HISTORY)
             # Created before the scan subscription: the executor then takes
             # the poses that wait before the scans that wait.
             self._pose_sub = self.create_subscription(
@@ -149,9 +154,10 @@ class RecordFingerprintsNode(Node):
             self.get_logger().warn(f'pose ignored: {problem}',
                                    throttle_duration_sec=THROTTLE_S)
             return
-        self._poses.append((stamp_time(msg.header.stamp, self.get_clock()),
-                            pose.position.x, pose.position.y,
-                            yaw_of(pose.orientation), msg.header.frame_id))
+        self._poses.add_pose(Pose(
+            stamp_time(msg.header.stamp, self.get_clock()), pose.position.x,
+            pose.position.y, yaw_of(pose.orientation), msg.header.frame_id))
+        self._release()
 
     def _on_odometry(self, msg):
         self.counts['odometry_received'] += 1
@@ -166,23 +172,29 @@ class RecordFingerprintsNode(Node):
             self.get_logger().warn(f'odometry pose skipped: {why}',
                                    throttle_duration_sec=THROTTLE_S)
 
-    def _position(self, stamp):
-        """Return (x, y, yaw, frame) of the pose nearest the scan, or None."""
-        t = stamp_time(stamp, self.get_clock())
+    def _release(self, everything=False):
+        """Label and write the held scans the rule can label now."""
         max_age = self.get_parameter('max_pose_age').value
-        if self._poses:
-            nearest = min(self._poses, key=lambda pose: abs(pose[0] - t))
-            if abs(nearest[0] - t) <= max_age:
-                return nearest[1:]
-            why = (f'the nearest pose is {abs(nearest[0] - t):.1f} s '
-                   f'{"older" if nearest[0] < t else "newer"} than the scan '
+        for t, scan, label in self._poses.release(max_age, everything):
+            if label is None:
+                self._no_pose(t, max_age)
+                continue
+            before, after, w = label
+            self._write(*scan, (*blend(before, after, w),
+                                before.frame))
+
+    def _no_pose(self, t, max_age):
+        """Count and log a scan that no pose labels."""
+        if self._poses.stamps:
+            nearest = min(self._poses.stamps, key=lambda s: abs(s - t))
+            why = (f'the nearest pose is {abs(nearest - t):.1f} s '
+                   f'{"older" if nearest < t else "newer"} than the scan '
                    f'(max_pose_age {max_age:g} s)')
         else:
             why = f'no pose yet on {self._pose_sub.topic_name}'
         self.counts['scans_no_fresh_pose'] += 1
         self.get_logger().warn(f'scan skipped: {why}',
                                throttle_duration_sec=THROTTLE_S)
-        return None
 
     def _on_scan(self, msg, info):
         self.counts['scans_lost'] += self._gaps.missed(self._scan_sub, info)
@@ -200,11 +212,15 @@ class RecordFingerprintsNode(Node):
             self.get_logger().warn('scan skipped: name and position differ '
                                    'in length', throttle_duration_sec=THROTTLE_S)
             return
-        position = None
-        if self._poses is not None:
-            position = self._position(msg.header.stamp)
-            if position is None:
-                return
+        if self._poses is None:
+            self._write(msg, building, floor)
+            return
+        self._poses.hold(stamp_time(msg.header.stamp, self.get_clock()),
+                         (msg, building, floor))
+        self._release()
+
+    def _write(self, msg, building, floor, position=None):
+        """Record one scan with its labels; log how it went."""
         recorded, skipped = self.log.add(msg.name, msg.position, building,
                                          floor, seconds(msg.header.stamp),
                                          position)
@@ -239,6 +255,9 @@ class RecordFingerprintsNode(Node):
                   for (b, f), n in counts] + [
             KeyValue(key='aps', value=str(len(self.log.ap_ids))),
             KeyValue(key='scans_waiting', value=str(len(self.log.pending)))]
+        if self._poses is not None:
+            values.append(KeyValue(key='scans_held',
+                                   value=str(len(self._poses.held))))
         if self._odometry is not None:
             values += [KeyValue(key='odometry_written',
                                 value=str(self._odometry.written)),
@@ -254,7 +273,9 @@ class RecordFingerprintsNode(Node):
         self.diag_pub.publish(out)
 
     def destroy_node(self):
-        """Write what waits in memory (else to a fallback file), then stop."""
+        """Write the held scans and what waits in memory, then stop."""
+        if self._poses is not None:
+            self._release(everything=True)
         self.files.save()
         super().destroy_node()
 

@@ -6,6 +6,7 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from sensor_msgs.msg import JointState
 
+from ..core.pose_label import MAX_POSE_AGE
 from .node_interface import float_range
 
 SUMMARY = """
@@ -13,9 +14,10 @@ Records a survey: appends every scan on wifi/scan to the fingerprint CSV
 `output` (created with its missing folders, or continued), labelled with
 the current `building` and `floor` parameters; change them as the robot
 moves (ros2 param set /record_fingerprints floor 2), -1 pauses. With
-`pose_topic`, each scan also gets the x, y, yaw of the nearest pose in
-time. With `odom_topic`, the odometry goes to a pose CSV beside it
-(walk1.csv -> walk1.odom.csv). train_model reads the scans; fit_odometry
+`pose_topic`, each scan also gets an x, y, yaw interpolated between the
+poses around it in time (the nearest if one side is missing). With
+`odom_topic`, the odometry goes to a pose CSV beside it (walk1.csv ->
+walk1.odom.csv). train_model reads the scans; fit_odometry
 fits the odometry's drift on both.
 """
 
@@ -60,8 +62,9 @@ PARAMETERS = (
                     'X, Y, YAW) is recorded to the CSV beside the output, '
                     'named <output without .csv>.odom.csv (walk1.csv -> '
                     'walk1.odom.csv); empty: no odometry', read_only=True)),
-    ('max_pose_age', 2.0, ParameterDescriptor(
-        description='s: the largest time between a scan and the pose that '
-                    'labels it', floating_point_range=float_range(0.0,
-                                                                  3600.0))),
+    ('max_pose_age', MAX_POSE_AGE, ParameterDescriptor(
+        description='s: the poses before and after a scan label it, '
+                    'interpolated, when both are this close to it in time; '
+                    'else the nearest one, if it is',
+        floating_point_range=float_range(0.0, 3600.0))),
 )

@@ -72,8 +72,9 @@ PARAMETERS = (
             's: after a jump of the localiser, no scan is recorded for this '
             'long'),
     _number('max_pose_age', _D.max_pose_age, 3600.0,
-            's: the largest time between a scan and the pose that labels '
-            'it'),
+            's: the localiser\'s poses before and after a scan label it, '
+            'interpolated, when both are this close to it in time; else the '
+            'nearest one, if it is'),
 )
 #: The parameters of :class:`.core.trusted.TrustParams`.
 TRUST_FIELDS = ('max_sd', 'jump_m', 'max_speed', 'settle_s', 'max_pose_age')

@@ -5,10 +5,16 @@ Subscribes ``wifi/scan``, the localiser's pose (``localizer_topic``,
 AMCL's ``amcl_pose``), localization_monitor's latched state
 (``status_topic``) and classifier_node's latched current place
 (``place_topic``), and appends each scan to ``output`` labelled with the
-localiser's pose nearest it in time and the current building and floor,
-when :func:`.core.trusted.untrusted` finds no reason against it (the
+localiser's pose by the labelling rule (:mod:`.core.pose_label`:
+interpolated between the poses around it, else the nearest, within
+``max_pose_age``) and the current building and floor, when
+:func:`.core.trusted.untrusted` finds no reason against it (the
 localiser sure of its pose and not jumping, the witness not saying lost;
-``cannot_tell`` does not stop it). The file is written as
+``cannot_tell`` does not stop it). A scan is held, with the witness's
+state and the place when it arrived, until a pose at or after its stamp
+arrives or a stamp more than ``max_pose_age`` past it; those held at
+shutdown are judged and labelled with the poses there are. The file is
+written as
 record_fingerprints writes it (:class:`.data.recording.FingerprintLog`
 with positions, :class:`.kept_files.KeptFiles`: nothing lost on a write
 fault, continued after a restart). Scans left out are counted by reason
@@ -17,7 +23,7 @@ why. A localiser pose that is not finite, has no unit quaternion, no
 usable frame or a negative or NaN variance is counted and left out.
 """
 
-from collections import Counter, deque
+from collections import Counter
 from dataclasses import replace
 import math
 from pathlib import Path
@@ -31,6 +37,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from ..core.pose_label import blend, HeldScans
 from ..core.trusted import (is_jump, LocaliserPose, REASONS, TrustParams,
                             untrusted)
 from ..data.recording import FingerprintLog, frame_problem, RecordingError
@@ -68,7 +75,7 @@ class TrustedRecorder(Node):
         self.counts.update({f'skipped/{r}': 0 for r in REASONS})
         self.files = KeptFiles(self.get_logger(), self.counts)
         self.files.add(self.log, 'scans', 'write_errors')
-        self.poses = deque(maxlen=POSE_HISTORY)
+        self.held = HeldScans(POSE_HISTORY)
         self.last_jump = None       # stamp of the localiser's newest jump
         self.witness = None         # localization_monitor's state
         self.place = None           # (building, floor)
@@ -127,16 +134,17 @@ class TrustedRecorder(Node):
                             pose.position.x, pose.position.y,
                             yaw_of(pose.orientation), msg.header.frame_id,
                             LocaliserPose.sd_of(cov[0], cov[7]))
-        if self.poses and is_jump(self.poses[-1], new, self.params):
+        old = self.held.poses[-1] if self.held.poses else None
+        if old is not None and is_jump(old, new, self.params):
             self.counts['localizer_jumps'] += 1
             self.last_jump = new.stamp
-            old = self.poses[-1]
             step = math.hypot(new.x - old.x, new.y - old.y)
             self.get_logger().info(
                 f'the localiser jumped {step:.2f} m in '
                 f'{new.stamp - old.stamp:.2f} s ({old.frame} -> {new.frame}): '
                 f'nothing recorded for {self.params.settle_s:g} s')
-        self.poses.append(new)
+        self.held.add_pose(new)
+        self._release()
 
     def _on_status(self, msg):
         self.witness = msg.data
@@ -151,18 +159,29 @@ class TrustedRecorder(Node):
                                        f'and floor: {values}',
                                        throttle_duration_sec=THROTTLE_S)
 
-    def _nearest(self, stamp):
-        if not self.poses:
-            return None
-        return min(self.poses, key=lambda pose: abs(pose.stamp - stamp))
-
     def _on_scan(self, msg, info):
         self.counts['scans_lost'] += self._gaps.missed(self._scan_sub, info)
         self.counts['scans_received'] += 1
-        stamp = stamp_time(msg.header.stamp, self.get_clock())
-        pose = self._nearest(stamp)
-        why = untrusted(stamp, pose, self.last_jump, self.witness,
-                        self.place, self.params)
+        self.held.hold(stamp_time(msg.header.stamp, self.get_clock()),
+                       (msg, self.witness, self.place))
+        self._release()
+
+    def _release(self, everything=False):
+        """Judge, label and write the held scans the rule can label now."""
+        for stamp, (msg, witness, place), label in self.held.release(
+                self.params.max_pose_age, everything):
+            pose = None
+            if label is not None:
+                before, after, w = label
+                pose = LocaliserPose(
+                    stamp, *blend(before, after, w),
+                    before.frame, max(before.sd, after.sd))
+            self._judge(msg, stamp, pose, witness, place)
+
+    def _judge(self, msg, stamp, pose, witness, place):
+        """Record the scan if the localiser's ``pose`` labels it trusted."""
+        why = untrusted(stamp, pose, self.last_jump, witness, place,
+                        self.params)
         self._follow(why)
         if why is not None:
             self.counts[f'skipped/{why}'] += 1
@@ -171,7 +190,7 @@ class TrustedRecorder(Node):
             self.counts['scans_unusable'] += 1
             return
         recorded, _ = self.log.add(
-            msg.name, msg.position, *self.place, seconds(msg.header.stamp),
+            msg.name, msg.position, *place, seconds(msg.header.stamp),
             (pose.x, pose.y, pose.yaw, pose.frame))
         self.files.check(self.log)
         self.counts['scans_recorded' if recorded else 'scans_unusable'] += 1
@@ -200,6 +219,7 @@ class TrustedRecorder(Node):
             level, message = DiagnosticStatus.ERROR, failing + message
         values = [_kv(f'scans/B{b}F{f}', n) for (b, f), n in counts] + [
             _kv('scans_waiting', len(self.log.pending)),
+            _kv('scans_held', len(self.held.held)),
             _kv('witness', self.witness or ''),
             _kv('place', '' if self.place is None else
                 f'B{self.place[0]}F{self.place[1]}')] + [
@@ -211,7 +231,8 @@ class TrustedRecorder(Node):
         self.diag_pub.publish(out)
 
     def destroy_node(self):
-        """Write what waits in memory (else to a fallback file), then stop."""
+        """Write the held scans and what waits in memory, then stop."""
+        self._release(everything=True)
         self.files.save()
         super().destroy_node()
 
