@@ -130,3 +130,33 @@ def write_ros1_bag(path, messages):
             writer.write(connections[topic], ns, ros1.serialize_ros1(
                 ros1.types[msgtype](**fields), msgtype))
     return Path(path)
+
+
+def relabelled(run, folder):
+    """
+    Return a copy of a run's CSVs in ``folder``, its scans labelled by the rule.
+
+    The shared runs' ``scans.csv`` interpolates between the poses around
+    every scan; the package's rule (core.pose_label) does so within
+    max_pose_age and takes the nearest pose otherwise, as a bag of the
+    run is labelled.
+    """
+    from wifi_place_recognition.data.bags import pose_labels
+    from wifi_place_recognition.data.poses import read_poses
+    folder = Path(folder)
+    folder.mkdir(parents=True)
+    for name in ('odom.csv', 'poses.csv', 'initial_pose.yaml'):
+        if (run / name).exists():
+            (folder / name).write_bytes((run / name).read_bytes())
+    header, *rows = (run / 'scans.csv').read_text().splitlines()
+    cells = [row.split(',') for row in rows]
+    xy, yaw = pose_labels(read_poses(run / 'poses.csv'),
+                          np.array([float(c[0]) for c in cells]))
+    names = header.split(',')
+    at = [names.index(c) for c in ('X', 'Y', 'YAW')]
+    for c, label in zip(cells, np.column_stack([xy, yaw])):
+        for j, value in zip(at, label):
+            c[j] = '' if np.isnan(value) else f'{value:.6f}'
+    (folder / 'scans.csv').write_text(
+        '\n'.join([header] + [','.join(c) for c in cells]) + '\n')
+    return folder

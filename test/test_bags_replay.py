@@ -2,13 +2,14 @@
 Bags through the tools that use a model: train, evaluate, replay.
 
 A model trained from a bag of b24test3; evaluate_model gives the same
-figures on the bag as on the run's CSV; replay_run plays a slice of the
+figures on the bag as on the run's CSV (labelled by the package's rule,
+as the bag is); replay_run plays a slice of the
 bag into a running classifier_node and scores it against the bag's poses.
 """
 
 import re
 
-from bag_helpers import RUN, run_messages, write_bag
+from bag_helpers import relabelled, RUN, run_messages, write_bag
 from conftest import FAST, python_module, run
 import pytest
 from ros_helpers import NodeProcess
@@ -29,11 +30,13 @@ def trained(tmp_path_factory):
     return bag, model
 
 
-def test_evaluate_model_gives_the_same_figures_on_the_bag(trained):
+def test_evaluate_model_gives_the_same_figures_on_the_bag(trained,
+                                                          tmp_path):
     bag, model = trained
+    csv = relabelled(RUN, tmp_path / 'run') / 'scans.csv'
     out = [run(python_module('cli.evaluate_model', '--model', model,
                              '--data', data))
-           for data in (RUN / 'scans.csv', bag)]
+           for data in (csv, bag)]
     assert [o.returncode for o in out] == [0, 0], out[1].stderr
     # the figures, less the first line (the data's name)
     figures = [o.stdout.split('\n', 1)[1] for o in out]

@@ -12,13 +12,12 @@ each message at its ``header.stamp``. A topic of another type is refused
 naming the type; the scans are needed, the odometry and poses not (a tool
 that needs them says so).
 
-The labelling rule (:func:`pose_labels`), the shared robot runs': a scan
-gets the pose linearly interpolated (yaw along the shorter arc) between
-the two poses around its stamp; a scan before the first or after the
-last pose gets none and is left out of a labelled run, with a note. (The
-recorder, labelling live, takes the nearest pose within
-``max_pose_age``; why interpolation here: doc/your-building.md, "Bags
-in".)
+The labelling rule (:func:`pose_labels`) is the recorders'
+(:mod:`.core.pose_label`, with its default ``max_pose_age``): a scan gets
+the pose linearly interpolated (yaw along the shorter arc) between the
+two poses around its stamp when both are within ``max_pose_age``, else
+the nearest within it; a scan with neither gets none and is left out of
+a labelled run, with a note (doc/your-building.md, "Bags in").
 
 A scan's readings follow the recorder's rule: readings that are not
 finite or not plausible RSSI are left out (counted), (0, 20] dBm is
@@ -32,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.pose_label import blend, MAX_POSE_AGE, pair, Pose
 from ..core.rssi import clip_plausible, plausible
 from ..core.scan import normalize_ap_id, ScanMapper
 from .columns import TIME, YAW
@@ -267,22 +267,21 @@ def _readings(names, rssi):
     return tuple(best), np.array(list(best.values()), np.float64)
 
 
-def pose_labels(poses, stamps):
+def pose_labels(poses, stamps, max_age=MAX_POSE_AGE):
     """
     Return (xy (n, 2), yaw (n,)) at ``stamps``: the labelling rule.
 
-    Linear between the two poses (rows stamp, x, y, yaw) around each
-    stamp, yaw along the shorter arc; NaN before the first and after the
-    last pose.
+    :mod:`.core.pose_label` over the poses (rows stamp, x, y, yaw, in
+    stamp order); NaN where no pose is within ``max_age`` seconds.
     """
-    t = poses[:, 0]
-    inside = (stamps >= t[0]) & (stamps <= t[-1])
-    xy = np.column_stack([np.interp(stamps, t, poses[:, 1]),
-                          np.interp(stamps, t, poses[:, 2])])
-    yaw = np.interp(stamps, t, np.unwrap(poses[:, 3]))
-    yaw = np.arctan2(np.sin(yaw), np.cos(yaw))
-    xy[~inside] = np.nan
-    return xy, np.where(inside, yaw, np.nan)
+    rows = [Pose(*row[:4], None) for row in poses.tolist()]
+    times = [p.stamp for p in rows]
+    out = np.full((len(stamps), 3), np.nan)
+    for n, t in enumerate(np.asarray(stamps, np.float64).tolist()):
+        found = pair(times, t, max_age)
+        if found is not None:
+            out[n] = blend(rows[found[0]], rows[found[1]], found[2])
+    return out[:, :2], out[:, 2]
 
 
 def heard_aps(recording):
@@ -311,8 +310,8 @@ def fingerprints(recording, building=0, floor=0):
     Return the scans of a :class:`Recording` as :class:`.Fingerprints`.
 
     Labelled ``building``, ``floor``; ``TIMESTAMP`` in ``meta``; with poses,
-    ``X``, ``Y`` and ``YAW`` by :func:`pose_labels` (scans outside the
-    poses' time span left out, with a note), as a run's ``scans.csv`` reads.
+    ``X``, ``Y`` and ``YAW`` by :func:`pose_labels` (scans it leaves
+    unlabelled left out, with a note), as a run's ``scans.csv`` reads.
     """
     ap_ids, rssi = scan_matrix(recording)
     n = len(rssi)
@@ -328,11 +327,11 @@ def fingerprints(recording, building=0, floor=0):
     fp.meta[YAW] = yaw
     unplaced = ~np.isfinite(xy).all(axis=1)
     if unplaced.all():
-        raise DataError(f'{recording.source}: no scan inside the time span '
-                        f'of the poses')
+        raise DataError(f'{recording.source}: no scan has a pose within '
+                        f'{MAX_POSE_AGE:g} s of it')
     if unplaced.any():
         fp.notes.append(f'{recording.source}: {int(unplaced.sum())} scan(s) '
-                        f'before the first or after the last pose left out')
+                        f'with no pose within {MAX_POSE_AGE:g} s left out')
         fp = fp.subset(~unplaced)
     return fp
 
