@@ -1,6 +1,8 @@
 """
-``update_model`` on a small building: a better candidate put in use, a
-worse one refused, nothing written on a failure, a rollback.
+``update_model`` on a small building, from the command line.
+
+A better candidate put in use, a worse one refused, nothing written on a
+failure, a rollback.
 
 The survey leaves a hole (x > 25 m of a 40 m floor) that the recorded
 scans cover; while recording, three APs of the survey are gone and three
