@@ -8,10 +8,12 @@ bag into a running classifier_node and scores it against the bag's poses.
 """
 
 import re
+import subprocess
 
 from bag_helpers import relabelled, RUN, run_messages, write_bag
-from conftest import FAST, python_module, run
+from conftest import FAST, python_module, run, wait_until
 import pytest
+import rclpy
 from ros_helpers import NodeProcess
 
 pytestmark = pytest.mark.skipif(not RUN.exists(),
@@ -67,3 +69,46 @@ def test_replay_run_plays_a_bag_into_the_node_and_scores_it(trained,
     fused = re.search(r'mean error \(m\) +[\d.]+ +[\d.]+ +([\d.]+)',
                       result.stdout)
     assert float(fused[1]) < 3.0, result.stdout
+
+
+def test_replay_run_feeds_the_localiser_to_a_monitor(trained, tmp_path, ros):
+    # the bag's amcl_pose on --localizer-topic: localization_monitor
+    # judges the replayed run as it would the robot's
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+    _, model = trained
+    bag = write_bag(tmp_path / 'slice', run_messages(seconds=240))
+    states = []
+    ros.create_subscription(
+        String, '/localization_monitor/status',
+        lambda msg: states.append(msg.data),
+        QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                   durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    nodes = [NodeProcess(tmp_path, python_module(
+        f'ros.{name}', '--ros-args', '-p', f'model_path:={model}'), name)
+        for name in ('classifier_node', 'localization_monitor')]
+    try:
+        replay = subprocess.Popen(python_module(
+            'cli.replay_run', '--data', bag, '--speed', '10', '--wait',
+            '60', '--localizer-topic', 'amcl_pose'),
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        while replay.poll() is None:
+            rclpy.spin_once(ros, timeout_sec=0.1)
+        out, err = replay.communicate()
+        wait_until(lambda: False, 1.0, ros)
+    finally:
+        logs = [node.stop() for node in nodes]
+    assert replay.returncode == 0, err
+    assert all(code == 0 for code, _ in logs), logs
+    assert 'agrees' in states and 'lost' not in states, states
+
+
+def test_localizer_topic_needs_poses_with_their_covariance(tmp_path):
+    result = run(python_module(
+        'cli.replay_run', '--data', RUN / 'scans.csv', '--odometry',
+        RUN / 'odom.csv', '--localizer-topic', 'amcl_pose', '--wait', '0'))
+    assert result.returncode == 2
+    last = result.stderr.strip().splitlines()[-1]    # after the notes
+    assert last.startswith('error: --localizer-topic needs') and \
+        'COV_XX' in last, result.stderr
+    assert 'Traceback' not in result.stderr

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 
 from ..core.atomic import atomic_write
-from ..data.bags import (COVARIANCE_COLUMNS, is_bag, pose_labels, read_bag,
+from ..data.bags import (is_bag, pose_labels, read_bag,
                          scan_matrix)
 from ..data.columns import NOT_DETECTED_MARKER
-from ..data.poses import POSE_COLUMNS
+from ..data.poses import COVARIANCE_COLUMNS, POSE_COLUMNS
 from .common import add_bag_arguments, bag_options, main_wrapper
 
 #: The files of a run, as in the shared robot runs.

@@ -14,6 +14,8 @@ from ..core.filter.trajectory import (inside_span, odometry_alone, score,
                                       time_span, truth_at)
 from ..ros.run_replayer import (arrays, check_spans, ODOMETRY_MARGIN_S,
                                 replay_run, RunReplayOptions)
+from ..data.bags import is_bag, read_bags
+from ..data.poses import COVARIANCE_COLUMNS, POSE_COLUMNS, read_poses
 from .common import (add_data_arguments, check_outputs, data_options,
                      main_wrapper, read_pose_input, read_run)
 
@@ -55,6 +57,12 @@ def main(argv=None):
                    help='times the recorded pace (default: %(default)s)')
     p.add_argument('--wait', type=float, default=15.0,
                    help='seconds to wait for the node to appear')
+    p.add_argument('--localizer-topic', metavar='TOPIC',
+                   help='also publish the localiser\'s poses with their '
+                        'covariance on TOPIC (e.g. amcl_pose), for a '
+                        'running localization_monitor: the bag\'s pose '
+                        'topic, or --truth (a poses CSV with COV_XX, '
+                        'COV_XY, COV_YY, COV_YAWYAW, or a bag)')
     p.add_argument('--place-topic', default='/classifier_node/place')
     p.add_argument('--pose-topic', default='/classifier_node/pose')
     p.add_argument('--json', type=Path, metavar='OUT.json',
@@ -73,7 +81,8 @@ def main(argv=None):
                   [('--data', d) for d in args.data] +
                   [('--odometry', args.odometry), ('--truth', args.truth)])
     data = data_options(args)
-    fp, run_odometry, _ = read_run(args.data, data, 'run', role='test')
+    fp, run_odometry, run_poses = read_run(args.data, data, 'run',
+                                           role='test')
     if 'TIMESTAMP' not in fp.meta:
         p.error(f'{fp.source} has no TIMESTAMP column')
     odometry = read_pose_input(args.odometry, 'odometry', data, run_odometry)
@@ -86,6 +95,9 @@ def main(argv=None):
     send = check_spans(fp.meta['TIMESTAMP'], odometry[:, 0], options.speed,
                        (fp.source, odometry_source))
     sent = int(send.sum())
+    localizer = None if args.localizer_topic is None else (
+        args.localizer_topic,
+        _localizer_poses(args.truth, data, run_poses, fp))
     if sent < len(send):
         print(f'note: {odometry_source}: sending {sent} of {len(send)} '
               f'odometry poses, {len(send) - sent} left out (more than '
@@ -96,7 +108,8 @@ def main(argv=None):
     node = rclpy.create_node('run_replayer')
     try:
         results = replay_run(node, fp, odometry[send], options,
-                             lambda s: print(s, file=sys.stderr, flush=True))
+                             lambda s: print(s, file=sys.stderr, flush=True),
+                             localizer)
     except (KeyboardInterrupt, ExternalShutdownException):
         return 130
     except RuntimeError as exc:
@@ -132,6 +145,30 @@ def main(argv=None):
                     'ODOM_Y,ODOM_YAW,FUSED_X,FUSED_Y,FUSED_YAW\n')
             np.savetxt(f, table, delimiter=',', fmt='%.6f')
     return 0 if answered == len(fp) else 1
+
+
+def _localizer_poses(truth, data, run_poses, fp):
+    """
+    Return the localiser's poses with their covariance, (n, 8) rows.
+
+    From ``--truth`` (a poses CSV with the covariance columns, or a bag),
+    else the run's bags'; the poses within the scans' span and
+    :data:`ODOMETRY_MARGIN_S` of it.
+    """
+    if truth is not None:
+        poses = read_poses(truth, POSE_COLUMNS + COVARIANCE_COLUMNS) \
+            if not is_bag(truth) else read_bags([truth], data.bag)[2]
+    else:
+        poses = run_poses
+    if poses is None or poses.shape[1] < 8:
+        raise ValueError('--localizer-topic needs the localiser\'s poses '
+                         'with their covariance: a bag with its pose '
+                         'topic, or --truth poses with COV_XX, COV_XY, '
+                         'COV_YY, COV_YAWYAW')
+    times = fp.meta['TIMESTAMP']
+    keep = (poses[:, 0] >= np.min(times) - ODOMETRY_MARGIN_S) & \
+        (poses[:, 0] <= np.max(times) + ODOMETRY_MARGIN_S)
+    return poses[keep, :8]
 
 
 def _own_truth(fp):

@@ -37,6 +37,7 @@ from ..core.scan import normalize_ap_id, ScanMapper
 from .columns import TIME, YAW
 from .files import DataError
 from .fingerprints import Fingerprints
+from .poses import COVARIANCE_COLUMNS  # noqa: F401 (the poses' columns)
 
 SCAN_TYPE = 'sensor_msgs/msg/JointState'
 ODOMETRY_TYPE = 'nav_msgs/msg/Odometry'
@@ -45,7 +46,6 @@ POSE_TYPE = 'geometry_msgs/msg/PoseWithCovarianceStamped'
 BAG_SUFFIXES = ('.mcap', '.db3', '.bag')
 #: The pose columns of the localiser's poses: those of a pose CSV, then
 #: the covariances of the shared runs' ``poses.csv``.
-COVARIANCE_COLUMNS = ('COV_XX', 'COV_XY', 'COV_YY', 'COV_YAWYAW')
 
 
 @dataclass(frozen=True)

@@ -16,11 +16,16 @@ from .files import DataError, decode
 
 #: The columns a pose CSV needs, in the order :func:`read_poses` returns.
 POSE_COLUMNS = ('TIMESTAMP', 'X', 'Y', 'YAW')
+#: A localiser's x, y, yaw covariance (m^2, rad^2) beside its poses.
+COVARIANCE_COLUMNS = ('COV_XX', 'COV_XY', 'COV_YY', 'COV_YAWYAW')
 
 
-def read_poses(path):
+def read_poses(path, columns=POSE_COLUMNS):
     """
     Return the poses of a CSV: float64 (n, 4) rows of stamp, x, y, yaw.
+
+    ``columns``: the columns read, in this order (e.g. with
+    :data:`COVARIANCE_COLUMNS` too: (n, 8) rows).
 
     Raises :class:`DataError` naming the file, row and column of a missing
     or repeated pose column (case ignored), a value that is not a finite
@@ -36,15 +41,15 @@ def read_poses(path):
     index = {}
     for j, h in enumerate(header):
         key = h.upper()
-        if key in POSE_COLUMNS and key in index:
+        if key in columns and key in index:
             raise DataError(f'{path}: columns {index[key] + 1} and {j + 1} '
                             f'are both {key} (case ignored)')
         index.setdefault(key, j)
-    missing = [c for c in POSE_COLUMNS if c not in index]
+    missing = [c for c in columns if c not in index]
     if missing:
         raise DataError(f'{path}: no column(s) {", ".join(missing)} (a pose '
-                        f'CSV has {",".join(POSE_COLUMNS)})')
-    columns = [index[c] for c in POSE_COLUMNS]
+                        f'CSV has {",".join(columns)})')
+    names, columns = columns, [index[c] for c in columns]
     out = []
     for line, row in enumerate(rows, start=2):
         if not row:
@@ -53,7 +58,7 @@ def read_poses(path):
             raise DataError(f'{path}: row {line} has {len(row)} fields, the '
                             f'header has {len(header)}')
         values = []
-        for name, j in zip(POSE_COLUMNS, columns):
+        for name, j in zip(names, columns):
             try:
                 value = float(row[j])
             except ValueError:

@@ -89,6 +89,25 @@ def check_spans(times, odometry_times, speed, names):
     return send
 
 
+def localizer_message(row):
+    """
+    Return a localiser's PoseWithCovarianceStamped (frame ``map``).
+
+    ``row``: stamp, x, y, yaw, then the x, y, yaw covariance as
+    :data:`..data.poses.COVARIANCE_COLUMNS` (xx, xy, yy, yaw-yaw).
+    """
+    msg = PoseWithCovarianceStamped()
+    msg.header = odometry_message(row).header
+    msg.header.frame_id = 'map'
+    msg.pose.pose = odometry_message(row).pose.pose
+    cov = [0.0] * 36
+    cov[0], cov[1], cov[6], cov[7], cov[35] = (
+        float(row[4]), float(row[5]), float(row[5]), float(row[6]),
+        float(row[7]))
+    msg.pose.covariance = cov
+    return msg
+
+
 def odometry_message(row):
     """Return a nav_msgs/Odometry of a (stamp, x, y, yaw) row."""
     msg = Odometry()
@@ -108,11 +127,14 @@ def odometry_message(row):
 class RunReplayer(Replayer):
     """A :class:`.replayer.Replayer` that also sends odometry, gets poses."""
 
-    def __init__(self, node, options):
+    def __init__(self, node, options, localizer_topic=None):
         super().__init__(node, options.place_topic)
         reliable = QoSProfile(depth=1000,
                               reliability=ReliabilityPolicy.RELIABLE)
         self.odom_pub = node.create_publisher(Odometry, 'odom', reliable)
+        self.localizer_pub = None if localizer_topic is None else \
+            node.create_publisher(PoseWithCovarianceStamped,
+                                  localizer_topic, reliable)
         self.poses = {}      # (sec, nanosec) -> PoseWithCovarianceStamped
         node.create_subscription(PoseWithCovarianceStamped,
                                  options.pose_topic, self._on_pose, reliable)
@@ -130,13 +152,16 @@ class RunReplayer(Replayer):
         return False
 
 
-def replay_run(node, fp, odometry, options, log):
+def replay_run(node, fp, odometry, options, log, localizer=None):
     """
     Send the scans of ``fp`` and the ``odometry`` rows, in stamp order.
 
-    Return {scan row: (place status or None, pose message or None)}.
+    ``localizer``: (topic, rows of :func:`localizer_message`): the
+    localiser's poses, sent too (for a localization_monitor). Return
+    {scan row: (place status or None, pose message or None)}.
     """
-    replayer = RunReplayer(node, options)
+    topic, poses = localizer if localizer is not None else (None, ())
+    replayer = RunReplayer(node, options, topic)
     if not replayer.wait_for_node(options.wait):
         raise RuntimeError(f'no classifier node took odom and answered on '
                            f'{options.place_topic} within {options.wait} s '
@@ -147,14 +172,17 @@ def replay_run(node, fp, odometry, options, log):
     order = np.argsort(times, kind='stable')
     stamps = dict(zip(order, unique_stamps(times[order])))
     events = sorted([(float(t), 0, k) for k, t in enumerate(odometry[:, 0])] +
-                    [(float(times[r]), 1, r) for r in order])
+                    [(float(times[r]), 1, r) for r in order] +
+                    [(float(row[0]), 2, k) for k, row in enumerate(poses)])
     start, t0 = time.monotonic(), events[0][0] if events else 0.0
     for n, (t, kind, k) in enumerate(events):
         replayer.spin_until(lambda: False,
                             start + (t - t0) / options.speed)
-        if kind:
+        if kind == 1:
             replayer.publish(k, scan_message(fp.ap_ids, fp.rssi[k],
                                              stamps[k]))
+        elif kind == 2:
+            replayer.localizer_pub.publish(localizer_message(poses[k]))
         else:
             replayer.odom_pub.publish(odometry_message(odometry[k]))
         if (n + 1) % 2000 == 0:
