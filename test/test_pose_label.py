@@ -73,8 +73,8 @@ def test_the_bags_label_by_the_same_rule():
 def test_held_scans_wait_for_a_pose_after_them_or_max_age():
     held = HeldScans(history=3)
     held.add_pose(POSES[0])
-    held.hold(10.5, 'a')
-    held.hold(11.0, 'b')
+    held.hold(10.5, 'a', 5.0)
+    held.hold(11.0, 'b', 5.0)
     assert held.release(5.0) == []          # no pose after them yet
     held.add_pose(POSES[1])
     (t, scan, (before, after, w)), (_, scan2, _) = held.release(5.0)
@@ -82,10 +82,10 @@ def test_held_scans_wait_for_a_pose_after_them_or_max_age():
                                            0.25)
     assert scan2 == 'b'
     # standing still: no pose after; held until a stamp 5 s later
-    held.hold(13.0, 'c')
-    held.hold(16.5, 'd')
+    held.hold(13.0, 'c', 5.0)
+    held.hold(16.5, 'd', 5.0)
     assert held.release(5.0) == []
-    held.hold(18.5, 'e')
+    held.hold(18.5, 'e', 5.0)
     (t, scan, (before, after, w)), = held.release(5.0)
     assert (scan, before, after) == ('c', POSES[1], POSES[1])
     # stopping: the rest, labelled with what is there, in order
@@ -95,3 +95,21 @@ def test_held_scans_wait_for_a_pose_after_them_or_max_age():
     held.add_pose(POSES[2])
     held.add_pose(Pose(11.0, 1.0, 1.0, 0.0, 'map'))
     assert held.stamps == [11.0, 12.0, 20.0]
+
+
+def test_a_scan_stamped_far_ahead_holds_up_nothing():
+    held = HeldScans(history=50)
+    held.add_pose(POSES[0])
+    held.hold(10.5, 'a', 5.0)
+    held.hold(10.5 + 1000.0, 'skewed', 5.0)     # a clock gone wrong
+    held.hold(11.0, 'b', 5.0)
+    held.add_pose(POSES[1])
+    released = [scan for _, scan, _ in held.release(5.0)]
+    assert released == ['a', 'skewed', 'b']
+    # however many wait for a pose, at most ``history`` are held
+    held = HeldScans(history=50)
+    for k in range(60):
+        held.hold(100.0 + 0.01 * k, k, 5.0)
+    released = held.release(5.0)
+    assert [scan for _, scan, _ in released] == list(range(10))
+    assert len(held.held) == 50

@@ -148,6 +148,14 @@ def test_update_refuse_fail_and_roll_back(site, tmp_path):
     assert result.stderr.splitlines()[-1].startswith('error: '), \
         result.stderr
     assert _listing(models) == before
+    for option, value in (('--tolerance-accuracy', 'nan'),
+                          ('--ap-window', '-1'), ('--nice', '-5')):
+        result = _update(site, models, '--survey', site / 'survey.csv',
+                         '--recorded', recorded, option, value)
+        assert result.returncode == 2, result.stderr
+        assert result.stderr.splitlines()[-1].startswith(
+            f'error: {option} {value}'), result.stderr
+    assert _listing(models) == before
     # roll back: the model in use before the update, in use again
     result = run(python_module('cli.update_model', '--folder', models,
                                '--rollback'))
@@ -160,3 +168,17 @@ def test_update_refuse_fail_and_roll_back(site, tmp_path):
                                '--rollback'))
     assert result.returncode == 2
     assert 'nothing to roll back to' in result.stderr
+
+
+def test_a_candidate_the_running_nodes_would_refuse_is_not_put_in_use(
+        site, synthetic, tmp_path):
+    # the model in use has no position output, the candidate has one:
+    # classifier_node refuses such a swap, so the update does too
+    models = tmp_path / 'models'
+    models.mkdir()
+    result = _update(site, models, '--model', synthetic[1], '--survey',
+                     site / 'survey.csv', '--recorded',
+                     site / 'recorded.csv', '--ap-window', '1')
+    assert result.returncode == 1, result.stderr
+    assert 'restart the node' in result.stderr.splitlines()[-1]
+    assert not (models / 'current').exists()

@@ -1,6 +1,7 @@
 """Pieces shared by the command-line tools: data arguments and error exits."""
 
-from dataclasses import dataclass, field, replace
+import argparse
+from dataclasses import dataclass, field, fields, replace
 import functools
 import os
 import sys
@@ -13,6 +14,7 @@ from ..data.files import DataError, download_uci
 from ..data.fingerprints import (read_fingerprints, ReaderOptions,
                                  SMALL_CLASS_POLICIES)
 from ..data.poses import read_poses
+from ..training.config import TrainConfig
 
 DEFAULT_CACHE = Path(os.environ.get('XDG_CACHE_HOME', Path.home() / '.cache')
                      ) / 'wifi_place_recognition'
@@ -321,3 +323,41 @@ def print_report(result, model, source):
     print('      ' + ' '.join(f'{n:>5s}' for n in names))
     for name, row in zip(names, result['confusion']):
         print(f'{name:>5s} ' + ' '.join(f'{v:5d}' for v in row))
+
+
+def _layers(text):
+    return tuple(int(n) for n in text.split(',') if n.strip())
+
+
+def add_training_arguments(parser, title, defaults=TrainConfig()):
+    """Add one option per :class:`TrainConfig` field (``defaults``)."""
+    g = parser.add_argument_group(title)
+    for f in fields(TrainConfig):
+        default = getattr(defaults, f.name)
+        flag = '--' + f.name.replace('_', '-')
+        if isinstance(default, bool):
+            g.add_argument(flag, action=argparse.BooleanOptionalAction,
+                           default=default)
+        elif isinstance(default, tuple):
+            g.add_argument(flag, type=_layers, default=default,
+                           metavar='N,N,...',
+                           help=f'default: {",".join(map(str, default))}')
+        else:
+            g.add_argument(flag, type=type(default), default=default,
+                           help=f'default: {default}')
+
+
+def training_config(args):
+    """Return the :class:`TrainConfig` of :func:`add_training_arguments`."""
+    return TrainConfig(**{f.name: getattr(args, f.name)
+                          for f in fields(TrainConfig)})
+
+
+def trainer():
+    """Return the torch trainer; a clear error where torch is missing."""
+    try:
+        from ..training.trainer import train
+    except ImportError as exc:
+        raise ValueError(f'training needs torch ({exc}); install the '
+                         f'package\'s [train] extra') from None
+    return train

@@ -2,18 +2,13 @@
 
 import argparse
 import sys
-from dataclasses import fields
 
 from ..core.artifact import save_model
 from ..core.evaluation import evaluate
-from ..training.config import TrainConfig
 from .common import (add_data_arguments, add_download_arguments,
-                     check_outputs, data_options, main_wrapper, print_report,
-                     read_data)
-
-
-def _layers(text):
-    return tuple(int(n) for n in text.split(',') if n.strip())
+                     add_training_arguments, check_outputs, data_options,
+                     main_wrapper, print_report, read_data, trainer,
+                     training_config)
 
 
 def build_parser():
@@ -38,23 +33,9 @@ def build_parser():
                    help='no per-epoch progress lines')
     add_download_arguments(p)
     add_data_arguments(p, training=True)
-    defaults = TrainConfig()
-    g = p.add_argument_group(
-        'model and training (defaults: the paper\'s network plus what '
+    add_training_arguments(
+        p, 'model and training (defaults: the paper\'s network plus what '
         'cross-validation chose; see doc/training.md)')
-    for f in fields(TrainConfig):
-        default = getattr(defaults, f.name)
-        flag = '--' + f.name.replace('_', '-')
-        if isinstance(default, bool):
-            g.add_argument(flag, action=argparse.BooleanOptionalAction,
-                           default=default)
-        elif isinstance(default, tuple):
-            g.add_argument(flag, type=_layers, default=default,
-                           metavar='N,N,...',
-                           help=f'default: {",".join(map(str, default))}')
-        else:
-            g.add_argument(flag, type=type(default), default=default,
-                           help=f'default: {default}')
     return p
 
 
@@ -65,8 +46,7 @@ def main(argv=None):
     check_outputs([('-o', args.output)], [
         (option, path) for option in ('--data', '--validation', '--test')
         for path in getattr(args, option[2:]) or ()])
-    config = TrainConfig(**{f.name: getattr(args, f.name)
-                            for f in fields(TrainConfig)})
+    config = training_config(args)
     data = data_options(args)
     train_fp = read_data(args.data, data, 'training data',
                          small_classes=args.small_classes)
@@ -83,7 +63,7 @@ def main(argv=None):
             print(line, file=sys.stderr, flush=True)
 
     print(train_fp.summary(), file=sys.stderr, flush=True)
-    model, _, report = _trainer()(train_fp, config, log, validation_fp)
+    model, _, report = trainer()(train_fp, config, log, validation_fp)
     save_model(model, args.output)
     networks = f'{len(model.members)} network(s) of {report.epochs} ' \
         f'epochs' if model.members else 'position only (one class)'
@@ -109,17 +89,6 @@ def main(argv=None):
     if test_fp is not None:
         print_report(evaluate(model, test_fp), model, test_fp.source)
     return 0
-
-
-def _trainer():
-    """Return the torch trainer; a clear error where torch is missing."""
-    try:
-        from ..training.trainer import train
-    except ImportError as exc:
-        raise ValueError(f'training needs torch ({exc}); install it with '
-                         f'pip install "torch==2.13.0" (or the package\'s '
-                         f'[train] extra)') from None
-    return train
 
 
 if __name__ == '__main__':

@@ -12,7 +12,7 @@ which APs came and went. ``--rollback`` puts the previous model back.
 """
 
 import argparse
-from dataclasses import fields
+import math
 import os
 from pathlib import Path
 import resource
@@ -26,14 +26,16 @@ from ..core.artifact import load_model, save_model
 from ..core.atomic import probe_folder
 from ..core.evaluation import evaluate
 from ..core.model_store import ModelStore, StoreError
+from ..core.pipeline.scan_pipeline import swap_problem
 from ..core.scan import normalize_ap_id, ScanMapper
 from ..core.update_check import (ap_changes, HOLDOUT_SHARE, MIN_HELD_OUT,
                                  newest, scores, Tolerance, verdict)
 from ..data.columns import distinct_aps, TIME
 from ..data.fingerprints import Fingerprints
 from ..training.config import TrainConfig
-from .common import add_data_arguments, data_options, main_wrapper, read_data
-from .train_model import _layers
+from .common import (add_data_arguments, add_training_arguments,
+                     data_options, main_wrapper, read_data, trainer,
+                     training_config)
 
 REFUSED = 1
 NODES = ('classifier_node', 'localization_monitor')
@@ -86,22 +88,9 @@ def build_parser():
     p.add_argument('--quiet', action='store_true',
                    help='no per-epoch progress lines')
     add_data_arguments(p, training=True)
-    defaults = TrainConfig(threads=1)
-    g = p.add_argument_group('model and training (as train_model\'s, but '
-                             'torch on one thread by default)')
-    for f in fields(TrainConfig):
-        default = getattr(defaults, f.name)
-        flag = '--' + f.name.replace('_', '-')
-        if isinstance(default, bool):
-            g.add_argument(flag, action=argparse.BooleanOptionalAction,
-                           default=default)
-        elif isinstance(default, tuple):
-            g.add_argument(flag, type=_layers, default=default,
-                           metavar='N,N,...',
-                           help=f'default: {",".join(map(str, default))}')
-        else:
-            g.add_argument(flag, type=type(default), default=default,
-                           help=f'default: {default}')
+    add_training_arguments(
+        p, 'model and training (as train_model\'s, but torch on one '
+        'thread by default)', TrainConfig(threads=1))
     return p
 
 
@@ -180,6 +169,15 @@ def main(argv=None):
         if not 0.0 < args.holdout < 1.0:
             raise ValueError(f'--holdout {args.holdout}: must be between 0 '
                              f'and 1')
+        for option in ('tolerance_accuracy', 'tolerance_position',
+                       'ap_window'):
+            value = getattr(args, option)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f'--{option.replace("_", "-")} {value}: '
+                                 f'must be a finite number >= 0')
+        if args.nice < 0:
+            raise ValueError(f'--nice {args.nice}: must be >= 0 (only '
+                             f'lowering the priority needs no privilege)')
         return _update(args, store)
     except StoreError as exc:
         raise ValueError(str(exc)) from None
@@ -188,8 +186,7 @@ def main(argv=None):
 def _update(args, store):
     os.nice(args.nice)
     start = time.monotonic()
-    config = TrainConfig(**{f.name: getattr(args, f.name)
-                            for f in fields(TrainConfig)})
+    config = training_config(args)
     in_use_path = _in_use(store, args.model)
     in_use = load_model(in_use_path)
     data = data_options(args)
@@ -208,12 +205,15 @@ def _update(args, store):
     leave_out = [] if args.keep_aps else [s['ap'] for s in changes['silent']]
     fp = together(survey, recorded.subset(~held), leave_out)
     print(fp.summary(), file=sys.stderr, flush=True)
-    candidate, _, training = _trainer()(fp, config, _log(args))
+    candidate, _, training = trainer()(fp, config, _log(args))
     test = recorded.subset(held)
     figures = {'in_use': scores(evaluate(in_use, test)),
                'candidate': scores(evaluate(candidate, test))}
     tolerance = Tolerance(args.tolerance_accuracy, args.tolerance_position)
     ok, reason = verdict(figures['in_use'], figures['candidate'], tolerance)
+    swap = swap_problem(in_use, candidate)
+    if ok and swap:     # the running nodes would refuse it
+        ok, reason = False, swap
     used = resource.getrusage(resource.RUSAGE_SELF)
     report = {
         'decision': 'put in use' if ok else 'refused', 'reason': reason,
@@ -267,16 +267,6 @@ def _line(figures):
     if 'position_mean_error_m' in figures:
         text += f', position {figures["position_mean_error_m"]:.2f} m'
     return text
-
-
-def _trainer():
-    """Return the torch trainer; a clear error where torch is missing."""
-    try:
-        from ..training.trainer import train
-    except ImportError as exc:
-        raise ValueError(f'training needs torch ({exc}); install the '
-                         f'package\'s [train] extra') from None
-    return train
 
 
 if __name__ == '__main__':

@@ -60,7 +60,8 @@ class HeldScans:
     kept in stamp order, the newest ``history``. A scan waits until a pose
     at or after its stamp has arrived, or a scan or pose stamped more than
     ``max_age`` after it (the stamps' clock): no later pose can label it
-    then. :meth:`release` returns the scans ready, each with the poses
+    then. A scan stamped ``max_age`` after everything before it waits for
+    nothing, and at most ``history`` wait. :meth:`release` returns the scans ready, each with the poses
     that label it, :meth:`release` with ``everything`` all of them (the
     recorder stops: labelled with what is there).
     """
@@ -80,9 +81,14 @@ class HeldScans:
             del self.stamps[0], self.poses[0]
         self.newest = max(self.newest, pose.stamp)
 
-    def hold(self, stamp, scan):
-        """Hold ``scan``, taken at ``stamp`` (s), until it can be labelled."""
-        self.held.append((stamp, scan))
+    def hold(self, stamp, scan, max_age):
+        """
+        Hold ``scan``, taken at ``stamp`` (s), until it can be labelled.
+
+        A stamp more than ``max_age`` after every stamp before it (a
+        clock gone wrong, or a long pause) waits for nothing.
+        """
+        self.held.append((stamp, scan, stamp > self.newest + max_age))
         self.newest = max(self.newest, stamp)
 
     def release(self, max_age, everything=False):
@@ -94,8 +100,10 @@ class HeldScans:
         """
         out = []
         while self.held:
-            stamp, scan = self.held[0]
-            if not (everything or self.stamps and self.stamps[-1] >= stamp
+            stamp, scan, ahead = self.held[0]
+            # nor does the oldest of more than ``history`` held
+            if not (everything or ahead or len(self.held) > self.history
+                    or self.stamps and self.stamps[-1] >= stamp
                     or self.newest > stamp + max_age):
                 break
             self.held.popleft()

@@ -216,7 +216,8 @@ class RecordFingerprintsNode(Node):
             self._write(msg, building, floor)
             return
         self._poses.hold(stamp_time(msg.header.stamp, self.get_clock()),
-                         (msg, building, floor))
+                         (msg, building, floor),
+                         self.get_parameter('max_pose_age').value)
         self._release()
 
     def _write(self, msg, building, floor, position=None):

@@ -163,7 +163,8 @@ class TrustedRecorder(Node):
         self.counts['scans_lost'] += self._gaps.missed(self._scan_sub, info)
         self.counts['scans_received'] += 1
         self.held.hold(stamp_time(msg.header.stamp, self.get_clock()),
-                       (msg, self.witness, self.place))
+                       (msg, self.witness, self.place),
+                       self.params.max_pose_age)
         self._release()
 
     def _release(self, everything=False):
