@@ -379,46 +379,47 @@ def summary_line(name, survey, figures):
             f'{mean(default, "in_95_ellipse"):5.3f}')
 
 
-def site_runs(data):
+def site_runs(data, folder):
     """
     Yield (building, its runs) of every building folder of ``data``.
 
     A run is a folder of the shared runs' CSVs (``scans.csv``,
     ``odom.csv``, ``poses.csv``), or a bag (a rosbag2 folder or file, a
     ROS 1 bag: the package's topics, building 0, floor 0), exported to
-    those CSVs in a temporary folder first, as ``bag_to_csv`` writes them.
+    those CSVs in ``folder`` first, as ``bag_to_csv`` writes them.
     """
     for site in sorted(d for d in data.iterdir() if d.is_dir()):
-        yield site.name, [Run(r) for r in run_folders(site)]
+        yield site.name, [Run(r) for r in run_folders(site, folder)]
 
 
-def run_folders(site):
+def run_folders(site, folder):
     """
     Return the run folders of a building folder, its bags exported.
 
-    The bags of a building are exported with the same AP columns, every
-    AP any of them heard (as the shared runs are).
+    The bags of a building are exported into ``folder`` with the same AP
+    columns, every AP any of them heard (as the shared runs are); a bag
+    without odometry or poses stops the benchmark with one line.
     """
-    folders = [r for r in sorted(site.iterdir()) if (r / 'odom.csv').exists()
-               or is_bag(r)]
-    bags = {r: read_bag(r) for r in folders if is_bag(r)}
+    runs = [r for r in sorted(site.iterdir()) if (r / 'odom.csv').exists()
+            or is_bag(r)]
+    bags = {r: read_bag(r) for r in runs if is_bag(r)}
+    for bag, recording in bags.items():
+        if recording.odometry is None or recording.poses is None:
+            raise SystemExit(f'error: {bag}: a run needs odometry and the '
+                             f'localiser\'s poses (odom, amcl_pose)')
     aps = sorted({ap for b in bags.values() for ap in heard_aps(b)})
-    return [exported(r, site.name, bags[r], aps) if r in bags else r
-            for r in folders]
-
-
-_EXPORTS = []
-
-
-def exported(bag, site, recording, ap_ids):
-    """Return a folder with ``bag`` (its recording) as a run's CSVs."""
-    if not _EXPORTS:
-        _EXPORTS.append(tempfile.TemporaryDirectory())
-    folder = Path(_EXPORTS[0].name) / site / bag.name.split('.')[0]
-    folder.mkdir(parents=True)
-    for file, text in run_tables(recording, 0, 0, ap_ids).items():
-        (folder / file).write_text(text)
-    return folder
+    out = []
+    for k, r in enumerate(runs):
+        if r in bags:
+            path = Path(folder) / 'runs' / site.name / Path(r.name).stem
+            if path.exists():   # run.mcap beside a run/ folder
+                path = path.with_name(f'{path.name}-{k}')
+            path.mkdir(parents=True)
+            for file, text in run_tables(bags[r], 0, 0, aps).items():
+                (path / file).write_text(text)
+            r = path
+        out.append(r)
+    return out
 
 
 def select(data, out):
@@ -432,7 +433,7 @@ def select(data, out):
     results = {'protocol': select.__doc__.strip(), 'candidates': {}}
     with tempfile.TemporaryDirectory() as folder:
         cases = []
-        for site, runs in site_runs(data):
+        for site, runs in site_runs(data, folder):
             for holes in (False, True):
                 trained = {r.name: models(r, folder, holes) for r in runs}
                 for train, test in permutations(runs, 2):
@@ -498,7 +499,7 @@ def main():
                'pairs': {}, 'holes': {}, 'kidnap': {}}
     print(HEADER)
     with tempfile.TemporaryDirectory() as folder:
-        for site, runs in site_runs(args.data):
+        for site, runs in site_runs(args.data, folder):
             for holes, key in ((False, 'pairs'), (True, 'holes')):
                 trained = {r.name: models(r, folder, holes) for r in runs}
                 for k, (train, test) in enumerate(permutations(runs, 2)):

@@ -451,7 +451,7 @@ def main():
         folder.mkdir(parents=True, exist_ok=True)
         cases = {}
         for site in sorted(d for d in args.data.iterdir() if d.is_dir()):
-            runs = [Run(r) for r in run_folders(site)]
+            runs = [Run(r) for r in run_folders(site, folder)]
             if len(runs) < 2:
                 continue
             models = {r.name: {k: train(r, [o for o in runs if o is not r],

@@ -195,3 +195,15 @@ def test_a_missing_odometry_topic_is_named_by_the_tool_that_needs_it(
     assert result.returncode == 2
     assert result.stderr.strip().splitlines()[-1].startswith(
         'error: no --odometry given (the run is not a bag with odometry)')
+
+
+def test_scan_matrix_refuses_columns_that_miss_an_ap():
+    from wifi_place_recognition.data.bags import Recording, scan_matrix
+    recording = Recording('r', [(1.0, ['aa:bb:cc:dd:ee:01',
+                                       'aa:bb:cc:dd:ee:02'], [-50.0, -60.0])])
+    ap_ids, rssi = scan_matrix(recording, ('aa:bb:cc:dd:ee:02',
+                                           'aa:bb:cc:dd:ee:01',
+                                           'aa:bb:cc:dd:ee:03'))
+    assert rssi[0, :2].tolist() == [-60.0, -50.0] and np.isnan(rssi[0, 2])
+    with pytest.raises(ValueError, match='aa:bb:cc:dd:ee:01 is not among'):
+        scan_matrix(recording, ('aa:bb:cc:dd:ee:02',))

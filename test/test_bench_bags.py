@@ -33,10 +33,10 @@ def test_a_folder_of_bags_gives_the_csvs_figures(fusion, tmp_path):
     (data / 'b24').mkdir(parents=True)
     for name in RUNS:
         write_bag(data / 'b24' / name, run_messages(ROBOT / 'b24' / name))
-    (site, bags), = fusion.site_runs(data)
+    (site, bags), = fusion.site_runs(data, tmp_path / 'exported')
     for name in RUNS:
         relabelled(ROBOT / 'b24' / name, tmp_path / 'csv' / 'b24' / name)
-    (_, csvs), = fusion.site_runs(tmp_path / 'csv')
+    (_, csvs), = fusion.site_runs(tmp_path / 'csv', tmp_path / 'unused')
     assert site == 'b24' and [r.name for r in bags] == list(RUNS)
     for bag, csv in zip(bags, csvs):
         np.testing.assert_allclose(bag.stamps, csv.stamps, atol=1e-6)
@@ -62,3 +62,13 @@ def test_a_folder_of_bags_gives_the_csvs_figures(fusion, tmp_path):
     np.testing.assert_allclose(figures[0][:2], figures[1][:2], rtol=1e-5)
     assert figures[0][4] == figures[1][4]
     np.testing.assert_allclose(figures[0][2:4], figures[1][2:4], rtol=0.1)
+
+
+def test_a_bag_without_odometry_stops_the_benchmark_in_one_line(
+        fusion, tmp_path):
+    (tmp_path / 'data' / 'b24').mkdir(parents=True)
+    write_bag(tmp_path / 'data' / 'b24' / 'scans-only.mcap', [
+        m for m in run_messages(ROBOT / 'b24' / RUNS[0], seconds=20)
+        if m[0] == '/wifi/scan'])
+    with pytest.raises(SystemExit, match='a run needs odometry'):
+        list(fusion.site_runs(tmp_path / 'data', tmp_path / 'exported'))

@@ -4,7 +4,8 @@ The labelling rule: the localiser's pose at a scan's stamp (ROS-free).
 One rule for the recorders, live, and the bags, offline. A scan taken at
 ``t`` gets the pose interpolated between the localiser's poses just before
 and just after ``t`` (x, y linearly, yaw along the shorter arc) when both
-are at most ``max_pose_age`` seconds from ``t`` (and in one frame); else
+are at most ``max_pose_age`` seconds from ``t`` (and in one frame: a
+bag's poses, one building and floor, are taken as one map's); else
 the pose nearest ``t``, if that one is (AMCL publishes only after the
 robot moved, so while it stands still one side is missing); else none.
 :data:`MAX_POSE_AGE`, the default, is chosen on the shared robot runs
@@ -52,6 +53,11 @@ def blend(a, b, w):
             math.atan2(math.sin(yaw), math.cos(yaw)))
 
 
+#: Seconds after every stamp before it from which a scan's stamp is taken
+#: for a clock gone wrong (or a long pause): it is labelled at once.
+SKEW_S = 60.0
+
+
 class HeldScans:
     """
     Scans held until the rule can label them, live, in arrival order.
@@ -60,10 +66,11 @@ class HeldScans:
     kept in stamp order, the newest ``history``. A scan waits until a pose
     at or after its stamp has arrived, or a scan or pose stamped more than
     ``max_age`` after it (the stamps' clock): no later pose can label it
-    then. A scan stamped ``max_age`` after everything before it waits for
-    nothing, and at most ``history`` wait. :meth:`release` returns the scans ready, each with the poses
-    that label it, :meth:`release` with ``everything`` all of them (the
-    recorder stops: labelled with what is there).
+    then. A scan stamped far after everything before it (:meth:`hold`)
+    waits for nothing, and at most ``history`` wait. :meth:`release`
+    returns the scans ready, each with the poses that label it,
+    :meth:`release` with ``everything`` all of them (the recorder stops:
+    labelled with what is there).
     """
 
     def __init__(self, history):
@@ -85,10 +92,12 @@ class HeldScans:
         """
         Hold ``scan``, taken at ``stamp`` (s), until it can be labelled.
 
-        A stamp more than ``max_age`` after every stamp before it (a
-        clock gone wrong, or a long pause) waits for nothing.
+        A stamp more than :data:`SKEW_S` (or ``max_age``, if longer) after
+        every stamp before it (a clock gone wrong, or a long pause) waits
+        for nothing.
         """
-        self.held.append((stamp, scan, stamp > self.newest + max_age))
+        self.held.append((stamp, scan,
+                          stamp > self.newest + max(SKEW_S, max_age)))
         self.newest = max(self.newest, stamp)
 
     def release(self, max_age, everything=False):

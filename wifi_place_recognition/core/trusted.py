@@ -9,8 +9,9 @@ poses must label the scan by the labelling rule (:mod:`.pose_label`,
 within ``max_pose_age`` seconds), their x and y standard deviations be
 at most ``max_sd`` metres, and no jump of the localiser (:func:`is_jump`)
 be in the ``settle_s`` seconds before the scan or since; the WiFi
-witness (localization_monitor's state) must not say ``lost``, and must
-have started (not ``waiting``). Its ``cannot_tell`` does not block:
+witness (localization_monitor's state) must say neither ``lost`` nor
+``disagrees`` (evidence against the localiser gathering), and must have
+started (not ``waiting``). Its ``cannot_tell`` does not block:
 inside a survey hole WiFi cannot testify, and that is where recording
 matters. The building and floor come from the current place; with none
 yet, nothing is trusted.

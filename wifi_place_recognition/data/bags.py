@@ -272,7 +272,8 @@ def pose_labels(poses, stamps, max_age=MAX_POSE_AGE):
     Return (xy (n, 2), yaw (n,)) at ``stamps``: the labelling rule.
 
     :mod:`.core.pose_label` over the poses (rows stamp, x, y, yaw, in
-    stamp order); NaN where no pose is within ``max_age`` seconds.
+    stamp order; one map's, as a bag is one building and floor); NaN
+    where no pose is within ``max_age`` seconds.
     """
     rows = [Pose(*row[:4], None) for row in poses.tolist()]
     times = [p.stamp for p in rows]
@@ -294,14 +295,18 @@ def scan_matrix(recording, ap_ids=None):
     """
     Return (AP ids, float32 RSSI (n, m), NaN = not heard).
 
-    ``ap_ids``: the columns (default: the APs heard, sorted); it must
-    hold every AP the scans heard.
+    ``ap_ids``: the columns (default: the APs heard, sorted); one the scans
+    heard but ``ap_ids`` lacks is refused (ValueError naming it).
     """
     ap_ids = heard_aps(recording) if ap_ids is None else tuple(ap_ids)
     mapper = ScanMapper(ap_ids)
     rssi = np.full((len(recording.scans), len(ap_ids)), np.nan, np.float32)
     for i, (_, names, values) in enumerate(recording.scans):
-        rssi[i, mapper.columns(names)] = values
+        columns = mapper.columns(names)
+        if (columns < 0).any():
+            raise ValueError(f'AP {names[int(np.argmin(columns))]} is not '
+                             f'among the {len(ap_ids)} columns given')
+        rssi[i, columns] = values
     return ap_ids, rssi
 
 

@@ -35,18 +35,21 @@ TOPICS = (
      'classifier_node\'s answers (place_topic): each scan\'s own position '
      'and sigma'),
     ('publishes', '~/status', String,
-     'the state: agrees (WiFi compared, the localiser is not lost), '
-     'cannot_tell (nothing to compare: no fused pose or scan yet, the '
-     'fused pose too wide, scans off the survey, the localiser silent), '
-     'lost, or waiting (no localiser pose yet); latched (transient local), '
-     'once per change'),
+     'the state: agrees (WiFi compared and found no disagreement, the '
+     'localiser is not lost), disagrees (evidence against the localiser '
+     'gathering, not yet lost), cannot_tell (nothing to compare: no fused '
+     'pose or scan yet, the fused pose too wide, scans off the survey, the '
+     'localiser silent), lost, or waiting (no localiser pose yet); latched '
+     '(transient local), once per change'),
     ('publishes', '~/localization_ok', Bool,
      'the verdict: true while the localiser is not known to be lost '
-     '(agrees or cannot_tell), false when lost or before its first pose; '
+     '(agrees, disagrees or cannot_tell), false when lost or before its '
+     'first pose; '
      'latched (transient local), once per change'),
     ('publishes', '/diagnostics', DiagnosticArray,
      'the status every second and at once on a change of state (OK agrees, '
-     'WARN cannot tell or no localiser pose yet, ERROR lost): agreement '
+     'WARN disagrees, cannot tell or no localiser pose yet, ERROR lost): '
+     'agreement '
      '(sigma), distance, for how long, score, bad localiser messages'),
     ('publishes', 'initialpose', PoseWithCovarianceStamped,
      'with initial_pose_on_lost: the fused pose and its covariance, at '

@@ -15,8 +15,9 @@ fingerprint CSV `output` (as record_fingerprints does: created or
 continued, nothing lost on a write fault), labelled with the localiser's
 pose (x, y, yaw, frame) and classifier_node's current building and floor,
 but only while the localiser is trusted: its pose sure (max_sd), no jump
-in the last settle_s seconds, and localization_monitor not saying lost
-(cannot_tell does not stop it: inside a survey hole WiFi cannot testify).
+in the last settle_s seconds, and localization_monitor saying neither
+lost nor disagrees (cannot_tell does not stop it: inside a survey hole
+WiFi cannot testify).
 Every scan left out is counted by reason.
 """
 
@@ -30,7 +31,8 @@ TOPICS = (
      'the localiser\'s pose and covariance (AMCL: amcl_pose); best effort, '
      'volatile: matches AMCL\'s and sensor-data publishers'),
     ('subscribes', '{status_topic}', String,
-     'localization_monitor\'s state (agrees, cannot_tell, lost, waiting); '
+     'localization_monitor\'s state (agrees, disagrees, cannot_tell, '
+     'lost, waiting); '
      'latched'),
     ('subscribes', '{place_topic}', DiagnosticArray,
      'classifier_node\'s current place (building, floor); latched'),

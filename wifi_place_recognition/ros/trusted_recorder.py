@@ -9,8 +9,8 @@ localiser's pose by the labelling rule (:mod:`.core.pose_label`:
 interpolated between the poses around it, else the nearest, within
 ``max_pose_age``) and the current building and floor, when
 :func:`.core.trusted.untrusted` finds no reason against it (the
-localiser sure of its pose and not jumping, the witness not saying lost;
-``cannot_tell`` does not stop it). A scan is held, with the witness's
+localiser sure of its pose and not jumping, the witness saying neither
+lost nor disagrees; ``cannot_tell`` does not stop it). A scan is held, with the witness's
 state and the place when it arrived, until a pose at or after its stamp
 arrives or a stamp more than ``max_pose_age`` past it; those held at
 shutdown are judged and labelled with the poses there are. The file is
