@@ -216,6 +216,8 @@ def test_a_displaced_localiser_is_lost_and_reseeded_near_the_truth(
     assert float(values['disagreeing_for_s']) > 0, values
     assert int(values['seeds_sent']) == 1
     assert m.states[-1] == 'lost', m.states
+    # the evidence gathered before the alarm: disagrees, not agrees
+    assert m.states.index('disagrees') < m.states.index('lost'), m.states
     level, message, _ = m.diagnosis('lost')
     assert level == 'ERROR' and message.startswith('localiser lost: ') and \
         'from the WiFi' in message, message
