@@ -1,9 +1,10 @@
 """
 Bring up the WiFi side of a robot beside Nav2, from one params file.
 
-wifi_scanner_node, classifier_node and localization_monitor, each switched
-by an argument (``scanner``, ``classifier``, ``monitor``; all true by
-default), read their sections of one params file
+wifi_scanner_node, classifier_node, localization_monitor and
+trusted_recorder, each switched by an argument (``scanner``,
+``classifier``, ``monitor``: true by default; ``recorder``: false), read
+their sections of one params file
 (``config/wifi_localization.yaml``). ``model_path`` and ``frame_id`` set
 both classifier_node's and localization_monitor's: the model and the
 frames are the same for both. Every node gets the same remappings: the
@@ -32,7 +33,13 @@ NODES = {
     'monitor': ('localization_monitor',
                 'true: start localization_monitor (is the localiser, e.g. '
                 'AMCL, lost? re-seeds it with initial_pose_on_lost)'),
+    'recorder': ('trusted_recorder',
+                 'true: start trusted_recorder (a survey that fills its '
+                 'own holes: each scan labelled by the localiser while it '
+                 'is trusted, appended to output)'),
 }
+#: The switches off by default (the others are on).
+OFF = ('recorder',)
 
 #: Launch arguments that set the parameter of that name of each node listed
 #: over the params file when given (empty, their default: the file's
@@ -54,9 +61,13 @@ PARAMETERS = {
     'initial_pose_on_change': (('classifier_node',),
                                'true: send initialpose when the building/'
                                'floor changes or the position jumps'),
-    'localizer_topic': (('localization_monitor',),
+    'localizer_topic': (('localization_monitor', 'trusted_recorder'),
                         'the localiser\'s PoseWithCovarianceStamped topic '
-                        'the monitor watches (AMCL: amcl_pose)'),
+                        'the monitor watches and the recorder labels by '
+                        '(AMCL: amcl_pose)'),
+    'output': (('trusted_recorder',),
+               'the fingerprint CSV trusted_recorder appends to (needed '
+               'with recorder:=true), e.g. /data/recorded.csv'),
     'initial_pose_on_lost': (('localization_monitor',),
                              'true: the monitor sends the fused pose on '
                              'initialpose at start-up and when the '
@@ -115,8 +126,8 @@ def generate_launch_description():
             description='YAML file with a section per node (thresholds: '
                         'see doc/parameters.md); the default is the '
                         'package\'s file of the defaults'),
-        *[DeclareLaunchArgument(switch, default_value='true',
-                                description=description)
+        *[DeclareLaunchArgument(switch, default_value=str(
+            switch not in OFF).lower(), description=description)
           for switch, (_, description) in NODES.items()],
         *[DeclareLaunchArgument(argument, default_value=default,
                                 description=description)

@@ -22,7 +22,8 @@ from ros_helpers import Client, NodeProcess
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.ros import (classifier_parameters,
                                         monitor_parameters,
-                                        scanner_parameters)
+                                        scanner_parameters,
+                                        trusted_parameters)
 import yaml
 
 PROBE = (['WAP001', 'WAP002', 'WAP003', 'WAP004'], [-60.0, -70.0, -80.0, -50.0])
@@ -255,11 +256,14 @@ def test_robot_launch_file_switches_each_node_and_shares_the_model():
                                  ('NODES', 'PARAMETERS', 'REMAPS'))
     tables = {'wifi_scanner_node': scanner_parameters,
               'classifier_node': classifier_parameters,
-              'localization_monitor': monitor_parameters}
+              'localization_monitor': monitor_parameters,
+              'trusted_recorder': trusted_parameters}
     # one switch per node, each an executable of the package
     assert {s: e for s, (e, _) in nodes.items()} == {
         'scanner': 'wifi_scanner_node', 'classifier': 'classifier_node',
-        'monitor': 'localization_monitor'}
+        'monitor': 'localization_monitor', 'recorder': 'trusted_recorder'}
+    # the recorder writes a survey: only when asked
+    assert _assigned(tree, 'OFF') == ('recorder',)
     scripts = (REPO / 'setup.py').read_text()
     assert all(f"'{e} = " in scripts for e, _ in nodes.values())
     # the model and the frames set on both nodes that use them
@@ -306,7 +310,8 @@ def test_robot_params_file_holds_every_nodes_defaults():
                             .read_text())
     tables = {'wifi_scanner_node': scanner_parameters,
               'classifier_node': classifier_parameters,
-              'localization_monitor': monitor_parameters}
+              'localization_monitor': monitor_parameters,
+              'trusted_recorder': trusted_parameters}
     assert list(config) == list(tables)
     for node, table in tables.items():
         values = config[node]['ros__parameters']
