@@ -49,7 +49,8 @@ import tempfile
 import numpy as np
 from wifi_place_recognition.cli.bag_to_csv import run_tables
 from wifi_place_recognition.core.artifact import load_model
-from wifi_place_recognition.core.coverage import COVERED_M
+from wifi_place_recognition.core.coverage import (COVERED_M,
+                                                  distance_to_survey)
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.filter.fusion import Fusion
@@ -199,8 +200,8 @@ def localise(params, odometry, stamps, single, seed):
 
 def in_holes(test, kept):
     """Return which test scans lie farther than COVERED_M from ``kept``."""
-    gap = np.linalg.norm(test.xy[:, None] - kept[None], axis=2).min(axis=1)
-    return np.isfinite(test.xy).all(axis=1) & ~(gap <= COVERED_M)
+    return np.isfinite(test.xy).all(axis=1) & \
+        ~(distance_to_survey(test.xy, kept) <= COVERED_M)
 
 
 def single_figures(test, single, hole):

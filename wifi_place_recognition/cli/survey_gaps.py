@@ -9,7 +9,8 @@ import numpy as np
 
 from ..core.artifact import load_model
 from ..core.evaluation import align
-from ..core.gaps import COVERED_M, distance_to_survey, gaps
+from ..core.coverage import COVERED_M, distance_to_survey
+from ..core.gaps import gaps
 from ..core.resources import default_model_path
 from .common import (add_data_arguments, check_outputs, data_options,
                      main_wrapper, read_data)

@@ -23,6 +23,30 @@ import numpy as np
 #: the label the model learns, and what survey_gaps and the benchmarks
 #: count as a hole.
 COVERED_M = 3.0
+#: Position pairs one step of :func:`distance_to_survey` compares at most.
+PAIRS_PER_STEP = 1 << 20
+
+
+def distance_to_survey(xy, survey_xy):
+    """
+    Return each position's distance (m) to the nearest survey position.
+
+    inf with no survey position, NaN for a position with NaN; compared in
+    steps of at most :data:`PAIRS_PER_STEP` pairs.
+    """
+    xy = np.asarray(xy, np.float64)
+    survey_xy = np.asarray(survey_xy, np.float64)
+    out = np.full(len(xy), np.inf)
+    if not len(survey_xy):
+        return out
+    step = max(1, PAIRS_PER_STEP // len(survey_xy))
+    for start in range(0, len(xy), step):
+        out[start:start + step] = np.linalg.norm(
+            xy[start:start + step, None] - survey_xy[None], axis=2).min(
+                axis=1)
+    return out
+
+
 #: What :func:`features` returns, in order.
 FEATURES = ('log_sigma', 'log_neighbour_ratio', 'log_spread',
             'unheard_share')

@@ -14,8 +14,6 @@ import math
 
 import numpy as np
 
-from .coverage import COVERED_M  # noqa: F401 (the default, re-exported)
-
 
 @dataclass(frozen=True)
 class Gap:
@@ -33,20 +31,6 @@ class Gap:
     def scans(self):
         """Return how many scans the stretch holds."""
         return self.last - self.first + 1
-
-
-def distance_to_survey(xy, survey_xy, chunk=4096):
-    """Return each position's distance (m) to the nearest survey position."""
-    xy = np.asarray(xy, np.float64)
-    survey_xy = np.asarray(survey_xy, np.float64)
-    out = np.full(len(xy), np.inf)
-    if not len(survey_xy):
-        return out
-    for start in range(0, len(xy), chunk):
-        part = xy[start:start + chunk]
-        out[start:start + chunk] = np.sqrt(((part[:, None] - survey_xy[None])
-                                            ** 2).sum(axis=2).min(axis=1))
-    return out
 
 
 def gaps(off, stamps=None, xy=None, min_scans=1):

@@ -15,8 +15,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from ..core.coverage import (COVERED_M, features as coverage_features,
-                             unheard_share)
+from ..core.coverage import (COVERED_M, distance_to_survey,
+                             features as coverage_features, unheard_share)
 from ..core.evaluation import align
 from ..core.locator import calibrated_sigma, Locator, METRICS
 from ..core.metrics import expected_calibration_error
@@ -284,14 +284,9 @@ def _covered(split):
     covered = np.zeros(len(split.held_y), bool)
     kept = split.fp.position[split.keep]
     for c in np.unique(split.held_y):
-        mine = np.flatnonzero(split.held_y == c)
-        refs = kept[split.y == c]
-        step = max(1, (1 << 20) // max(len(refs), 1))   # 1 M pairs a step
-        for start in range(0, len(mine) if len(refs) else 0, step):
-            rows = mine[start:start + step]
-            gap = np.linalg.norm(split.held_position[rows, None] - refs[None],
-                                 axis=2)
-            covered[rows] = gap.min(axis=1) <= COVERED_M
+        mine = split.held_y == c
+        covered[mine] = distance_to_survey(split.held_position[mine],
+                                           kept[split.y == c]) <= COVERED_M
     return covered
 
 
