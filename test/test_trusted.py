@@ -3,7 +3,7 @@
 from dataclasses import replace
 
 from wifi_place_recognition.core.trusted import (
-    is_jump, LocaliserPose, REASONS, TrustParams, untrusted)
+    is_jump, LocaliserPose, REASONS, TrustGate, TrustParams, untrusted)
 
 P = TrustParams()
 HERE = LocaliserPose(100.0, 5.0, 5.0, 0.0, 'map', 0.1)
@@ -45,3 +45,25 @@ def test_a_jump_is_a_step_faster_than_driving_or_another_frame():
     assert is_jump(HERE, far, P)
     assert is_jump(HERE, replace(HERE, frame='map_f1'), P)
     assert LocaliserPose.sd_of(0.01, 0.04) == 0.2
+
+
+def test_the_gate_labels_a_scan_with_the_poses_around_it_and_its_witness():
+    gate = TrustGate()
+    gate.witness, gate.place = 'agrees', (0, 1)
+    assert gate.pose(HERE) is None
+    gate.scan(100.5, 'a')
+    gate.witness = 'lost'       # after the scan came: not its witness
+    assert gate.release() == []     # waits for a pose after it
+    assert gate.pose(replace(HERE, stamp=101.0, x=6.0)) is None
+    [(stamp, scan, pose, place, why)] = gate.release()
+    assert (stamp, scan, place, why) == (100.5, 'a', (0, 1), None)
+    assert (pose.x, pose.sd) == (5.5, 0.1)
+    gate.scan(101.5, 'b')       # while lost
+    gate.witness = 'cannot_tell'
+    gate.scan(101.6, 'c')
+    jumped = replace(HERE, stamp=102.0, x=20.0)
+    assert gate.pose(jumped).x == 6.0       # the pose before the jump
+    assert [r[-1] for r in gate.release()] == ['lost', 'jumped']
+    gate.scan(102.0 + P.settle_s + 0.5, 'd')
+    gate.pose(replace(jumped, stamp=102.0 + P.settle_s + 1))
+    assert [r[-1] for r in gate.release()] == [None]

@@ -53,6 +53,9 @@ def blend(a, b, w):
             math.atan2(math.sin(yaw), math.cos(yaw)))
 
 
+#: Poses a :class:`HeldScans` keeps by default (about 8 minutes of
+#: AMCL's while driving) to label the scans held.
+POSE_HISTORY = 500
 #: Seconds after every stamp before it from which a scan's stamp is taken
 #: for a clock gone wrong (or a long pause): it is labelled at once.
 SKEW_S = 60.0
@@ -73,7 +76,7 @@ class HeldScans:
     labelled with what is there).
     """
 
-    def __init__(self, history):
+    def __init__(self, history=POSE_HISTORY):
         self.history = history
         self.stamps, self.poses = [], []
         self.held = deque()         # (stamp, scan)

@@ -14,13 +14,15 @@ witness (localization_monitor's state) must say neither ``lost`` nor
 started (not ``waiting``). Its ``cannot_tell`` does not block:
 inside a survey hole WiFi cannot testify, and that is where recording
 matters. The building and floor come from the current place; with none
-yet, nothing is trusted.
+yet, nothing is trusted. :class:`TrustGate` applies the rule live, to
+the streams as they come (what trusted_recorder runs, and the
+self-update benchmark offline).
 """
 
 from dataclasses import dataclass
 import math
 
-from .pose_label import MAX_POSE_AGE
+from .pose_label import blend, HeldScans, MAX_POSE_AGE
 from .witness import AGREES, CANNOT_TELL, DISAGREES, LOST
 
 #: Why a scan was not trusted, and what that means.
@@ -101,3 +103,64 @@ def untrusted(stamp, pose, last_jump, witness, place, params):
     if last_jump is not None and last_jump >= stamp - params.settle_s:
         return 'jumped'
     return None
+
+
+class TrustGate:
+    """
+    The rule applied live: the localiser, the witness, the place, scans.
+
+    Feed the localiser's poses (:meth:`pose`), the witness's state and
+    the current place as they change (attributes ``witness`` and
+    ``place``) and the scans (:meth:`scan`) in arrival order; each scan
+    is held, with the witness's state and the place when it came, until
+    the labelling rule can label it (:class:`.pose_label.HeldScans`).
+    :meth:`release` judges the scans ready. ``params`` may be replaced
+    between calls.
+    """
+
+    def __init__(self, params=TrustParams()):
+        self.params = params
+        self.held = HeldScans()
+        self.last_jump = None       # stamp of the localiser's newest jump
+        self.witness = None         # the witness's state (None: not heard)
+        self.place = None           # (building, floor) or None
+
+    def pose(self, new):
+        """
+        Take a :class:`LocaliserPose`; return the pose before it on a jump.
+
+        None when it did not jump (:func:`is_jump`).
+        """
+        old = self.held.poses[-1] if self.held.poses else None
+        jumped = old is not None and is_jump(old, new, self.params)
+        if jumped:
+            self.last_jump = new.stamp
+        self.held.add_pose(new)
+        return old if jumped else None
+
+    def scan(self, stamp, scan):
+        """Hold ``scan`` (anything), taken at ``stamp`` (s)."""
+        self.held.hold(stamp, (scan, self.witness, self.place),
+                       self.params.max_pose_age)
+
+    def release(self, everything=False):
+        """
+        Return [(stamp, scan, pose, place, why)] of the scans judged now.
+
+        ``pose``: the :class:`LocaliserPose` labelling it (None: none),
+        ``place`` the (building, floor) when it came, ``why`` the key of
+        :data:`REASONS` against it or None (trusted). ``everything``:
+        also those still waiting for a pose (a stop).
+        """
+        out = []
+        for stamp, (scan, witness, place), label in self.held.release(
+                self.params.max_pose_age, everything):
+            pose = None
+            if label is not None:
+                before, after, w = label
+                pose = LocaliserPose(stamp, *blend(before, after, w),
+                                     before.frame, max(before.sd, after.sd))
+            why = untrusted(stamp, pose, self.last_jump, witness, place,
+                            self.params)
+            out.append((stamp, scan, pose, place, why))
+        return out

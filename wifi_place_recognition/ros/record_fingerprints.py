@@ -79,8 +79,6 @@ ODOM_QOS = copy.copy(POSE_QOS)
 ODOM_QOS.depth = 1000
 QOS_OVERRIDES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
                  QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
-#: Poses kept to label the scans held or waiting in the queue.
-POSE_HISTORY = 500
 
 
 class RecordFingerprintsNode(Node):
@@ -119,7 +117,7 @@ class RecordFingerprintsNode(Node):
         if pose_topic:
             self.counts.update(scans_no_fresh_pose=0, poses_received=0,
                                poses_rejected=0)
-            self._poses = HeldScans(POSE_HISTORY)
+            self._poses = HeldScans()
             # Created before the scan subscription: the executor then takes
             # the poses that wait before the scans that wait.
             self._pose_sub = self.create_subscription(

@@ -8,7 +8,7 @@ AMCL's ``amcl_pose``), localization_monitor's latched state
 localiser's pose by the labelling rule (:mod:`.core.pose_label`:
 interpolated between the poses around it, else the nearest, within
 ``max_pose_age``) and the current building and floor, when
-:func:`.core.trusted.untrusted` finds no reason against it (the
+:class:`.core.trusted.TrustGate` finds no reason against it (the
 localiser sure of its pose and not jumping, the witness saying neither
 lost nor disagrees; ``cannot_tell`` does not stop it). A scan is held, with the witness's
 state and the place when it arrived, until a pose at or after its stamp
@@ -37,15 +37,13 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from ..core.pose_label import blend, HeldScans
-from ..core.trusted import (is_jump, LocaliserPose, REASONS, TrustParams,
-                            untrusted)
+from ..core.trusted import LocaliserPose, REASONS, TrustGate, TrustParams
 from ..data.recording import FingerprintLog, frame_problem, RecordingError
 from .kept_files import KeptFiles
 from .messages import (key_value as _kv, pose_problem, seconds, stamp_time,
                        status_values, yaw_of)
 from .node_interface import declare
-from .record_fingerprints import POSE_HISTORY, POSE_QOS, SCAN_QOS
+from .record_fingerprints import POSE_QOS, SCAN_QOS
 from .runner import names_the_node, run
 from .sequence import PublisherGaps
 from .trusted_parameters import PARAMETERS, TRUST_FIELDS
@@ -65,7 +63,8 @@ class TrustedRecorder(Node):
         if not values['output']:
             raise RecordingError('parameter output (the CSV path) is not '
                                  'set')
-        self.params = TrustParams(**{k: values[k] for k in TRUST_FIELDS})
+        self.gate = TrustGate(TrustParams(**{k: values[k]
+                                             for k in TRUST_FIELDS}))
         self.log = FingerprintLog(Path(values['output']).expanduser(),
                                   positions=True)
         self.counts = Counter(scans_received=0, scans_recorded=0,
@@ -75,10 +74,6 @@ class TrustedRecorder(Node):
         self.counts.update({f'skipped/{r}': 0 for r in REASONS})
         self.files = KeptFiles(self.get_logger(), self.counts)
         self.files.add(self.log, 'scans', 'write_errors')
-        self.held = HeldScans(POSE_HISTORY)
-        self.last_jump = None       # stamp of the localiser's newest jump
-        self.witness = None         # localization_monitor's state
-        self.place = None           # (building, floor)
         self.why_not = 'not started'   # why the last scan was left out
         self._gaps = PublisherGaps()
         self.add_on_set_parameters_callback(self._validate)
@@ -99,7 +94,7 @@ class TrustedRecorder(Node):
             JointState, 'wifi/scan', self._on_scan, SCAN_QOS)
         self.create_timer(1.0, self._publish_progress)
         localizer, status, place = (s.topic_name for s in self.subs)
-        p = self.params
+        p = self.gate.params
         self.get_logger().info(
             f'recording to {self.log.path} ({sum(self.log.counts.values())} '
             f'scans already there) while {localizer} is sure (max_sd '
@@ -115,7 +110,7 @@ class TrustedRecorder(Node):
         return SetParametersResult(successful=True)
 
     def _apply(self, params):
-        self.params = replace(self.params, **{
+        self.gate.params = replace(self.gate.params, **{
             p.name: p.value for p in params if p.name in TRUST_FIELDS})
 
     # inputs ---------------------------------------------------------------
@@ -134,26 +129,25 @@ class TrustedRecorder(Node):
                             pose.position.x, pose.position.y,
                             yaw_of(pose.orientation), msg.header.frame_id,
                             LocaliserPose.sd_of(cov[0], cov[7]))
-        old = self.held.poses[-1] if self.held.poses else None
-        if old is not None and is_jump(old, new, self.params):
+        old = self.gate.pose(new)
+        if old is not None:
             self.counts['localizer_jumps'] += 1
-            self.last_jump = new.stamp
             step = math.hypot(new.x - old.x, new.y - old.y)
             self.get_logger().info(
                 f'the localiser jumped {step:.2f} m in '
                 f'{new.stamp - old.stamp:.2f} s ({old.frame} -> {new.frame}): '
-                f'nothing recorded for {self.params.settle_s:g} s')
-        self.held.add_pose(new)
+                f'nothing recorded for {self.gate.params.settle_s:g} s')
         self._release()
 
     def _on_status(self, msg):
-        self.witness = msg.data
+        self.gate.witness = msg.data
 
     def _on_place(self, msg):
         for status in msg.status:
             values = status_values(status)
             try:
-                self.place = (int(values['building']), int(values['floor']))
+                self.gate.place = (int(values['building']),
+                                   int(values['floor']))
             except (KeyError, ValueError):
                 self.get_logger().warn(f'current place without a building '
                                        f'and floor: {values}',
@@ -162,27 +156,16 @@ class TrustedRecorder(Node):
     def _on_scan(self, msg, info):
         self.counts['scans_lost'] += self._gaps.missed(self._scan_sub, info)
         self.counts['scans_received'] += 1
-        self.held.hold(stamp_time(msg.header.stamp, self.get_clock()),
-                       (msg, self.witness, self.place),
-                       self.params.max_pose_age)
+        self.gate.scan(stamp_time(msg.header.stamp, self.get_clock()), msg)
         self._release()
 
     def _release(self, everything=False):
         """Judge, label and write the held scans the rule can label now."""
-        for stamp, (msg, witness, place), label in self.held.release(
-                self.params.max_pose_age, everything):
-            pose = None
-            if label is not None:
-                before, after, w = label
-                pose = LocaliserPose(
-                    stamp, *blend(before, after, w),
-                    before.frame, max(before.sd, after.sd))
-            self._judge(msg, stamp, pose, witness, place)
+        for _, msg, pose, place, why in self.gate.release(everything):
+            self._record(msg, pose, place, why)
 
-    def _judge(self, msg, stamp, pose, witness, place):
-        """Record the scan if the localiser's ``pose`` labels it trusted."""
-        why = untrusted(stamp, pose, self.last_jump, witness, place,
-                        self.params)
+    def _record(self, msg, pose, place, why):
+        """Record the scan if nothing is against it (``why`` None)."""
         self._follow(why)
         if why is not None:
             self.counts[f'skipped/{why}'] += 1
@@ -220,10 +203,10 @@ class TrustedRecorder(Node):
             level, message = DiagnosticStatus.ERROR, failing + message
         values = [_kv(f'scans/B{b}F{f}', n) for (b, f), n in counts] + [
             _kv('scans_waiting', len(self.log.pending)),
-            _kv('scans_held', len(self.held.held)),
-            _kv('witness', self.witness or ''),
-            _kv('place', '' if self.place is None else
-                f'B{self.place[0]}F{self.place[1]}')] + [
+            _kv('scans_held', len(self.gate.held.held)),
+            _kv('witness', self.gate.witness or ''),
+            _kv('place', '' if self.gate.place is None else
+                f'B{self.gate.place[0]}F{self.gate.place[1]}')] + [
             _kv(k, n) for k, n in self.counts.items()]
         out = DiagnosticArray(status=[DiagnosticStatus(
             level=level, name=f'{self.get_name()}: progress',
