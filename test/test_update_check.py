@@ -3,13 +3,15 @@
 import errno
 import json
 import os
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from wifi_place_recognition.core import model_store
 from wifi_place_recognition.core.model_store import ModelStore, StoreError
 from wifi_place_recognition.core.update_check import (ap_changes, newest,
-                                                      Tolerance, verdict)
+                                                      off_survey, Tolerance,
+                                                      verdict)
 
 IN_USE = {'building_floor_accuracy': 0.90, 'position_mean_error_m': 3.0}
 
@@ -62,6 +64,28 @@ def test_silent_and_new_aps():
     assert short['silent'] == [] and 'spans less' in short['note']
     untimed = ap_changes(model, recorded, rssi, None, hour)
     assert untimed['silent'] == [] and untimed['new'] == found['new']
+
+
+def _places(building, floor, xy):
+    return SimpleNamespace(building=np.array(building),
+                           floor=np.array(floor),
+                           position=np.array(xy, np.float64))
+
+
+def test_new_ground_is_off_every_survey_scan_of_its_own_floor():
+    survey = _places([0, 0, 0], [0, 0, 1], [[0, 0], [10, 0], [20, 0]])
+    recorded = _places(
+        [0, 0, 0, 0, 0, 1],
+        [0, 0, 0, 1, 2, 0],
+        [[2.9, 0], [13.1, 0], [5, 0],   # within 3 m; beyond; 5 m from both
+         [10, 0],                       # on a survey scan of floor 0 only
+         [0, 0], [0, 0]])               # a floor and a building unsurveyed
+    assert off_survey(recorded, survey).tolist() == \
+        [False, True, True, True, True, True]
+    with pytest.raises(ValueError, match='survey scans have no positions'):
+        off_survey(recorded, SimpleNamespace(building=np.array([0]),
+                                             floor=np.array([0]),
+                                             position=None))
 
 
 def _model(tmp_path, name, content):

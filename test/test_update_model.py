@@ -2,7 +2,9 @@
 ``update_model`` on a small building, from the command line.
 
 A better candidate put in use, a worse one refused, nothing written on a
-failure, a rollback.
+failure, a rollback; the same for a references-only update (asked for, or
+where torch cannot be imported); nothing built with too little new
+ground.
 
 The survey leaves a hole (x > 25 m of a 40 m floor) that the recorded
 scans cover; while recording, three APs of the survey are gone and three
@@ -10,12 +12,16 @@ new ones are heard.
 """
 
 import json
+import sys
 
 from conftest import FAST, mac, python_module, run
 import numpy as np
 import pytest
 from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.core.references import PROVENANCE
 from wifi_place_recognition.core.scan import normalize_ap_id
+from wifi_place_recognition.core.update_check import newest
+from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.recording import FingerprintLog
 
 APS = 33                # 0-29 in the survey; 0-2 gone and 30-32 new later
@@ -60,13 +66,24 @@ def _survey(path, building, shuffled=False, per_floor=150):
     return path
 
 
-def _recorded(path, building, scans=300):
-    """Write what trusted_recorder would: the whole floors, 2 h, new APs."""
+def _recorded(path, building, scans=300, lost=0):
+    """
+    Write what trusted_recorder would: the whole floors, 2 h, new APs.
+
+    ``lost``: the first ``lost`` scans get each other's positions (a
+    localiser lost then).
+    """
     rng = np.random.default_rng(2)
-    log = FingerprintLog(path, positions=True)
+    rows = []
     for k in range(scans):
         xy, floor = rng.uniform(0, 40, 2), k % 2
-        heard = _readings(building, xy, floor, RECORDED, rng)
+        rows.append((xy, floor, _readings(building, xy, floor, RECORDED,
+                                          rng)))
+    labels = [xy for xy, _, _ in rows]
+    labels[:lost] = [labels[i] for i in
+                     np.random.default_rng(3).permutation(lost)]
+    log = FingerprintLog(path, positions=True)
+    for k, ((_, floor, heard), xy) in enumerate(zip(rows, labels)):
         log.add(list(heard), list(heard.values()), 0, floor, 24.0 * k,
                 (xy[0], xy[1], 0.0, 'map'))
     return path
@@ -74,12 +91,17 @@ def _recorded(path, building, scans=300):
 
 @pytest.fixture(scope='module')
 def site(tmp_path_factory):
-    """Return a folder: survey, poisoned survey, recording, model in use."""
+    """
+    Return a folder: survey, poisoned survey, recording, model in use.
+
+    And a recording whose scans not held out have each other's positions.
+    """
     folder = tmp_path_factory.mktemp('site')
     building = _building()
     survey = _survey(folder / 'survey.csv', building)
     _survey(folder / 'poisoned.csv', building, shuffled=True)
     _recorded(folder / 'recorded.csv', building)
+    _recorded(folder / 'lost.csv', building, lost=240)
     result = run(python_module('cli.train_model', '--data', survey, '-o',
                                folder / 'in_use.npz', *TRAIN))
     assert result.returncode == 0, result.stderr
@@ -119,6 +141,9 @@ def test_update_refuse_fail_and_roll_back(site, tmp_path):
     assert report['decision'] == 'put in use', report
     assert report['protocol']['held_out_scans'] == 60
     assert report['candidate']['training']['recorded_scans'] == 240
+    assert report['protocol']['update'].startswith('full'), report
+    beyond, off = _off_survey_bounds(site)
+    assert beyond <= report['new_ground']['scans'] <= off, report
     assert report['candidate']['position_mean_error_m'] < \
         report['in_use']['position_mean_error_m'], report
     aps = report['access_points']
@@ -182,3 +207,125 @@ def test_a_candidate_the_running_nodes_would_refuse_is_not_put_in_use(
     assert result.returncode == 1, result.stderr
     assert 'restart the node' in result.stderr.splitlines()[-1]
     assert not (models / 'current').exists()
+
+
+#: update_model where torch cannot be imported, as on a robot with the
+#: nodes only.
+NO_TORCH = ('import sys; sys.modules["torch"] = None; '
+            'from wifi_place_recognition.cli.update_model import main; '
+            'sys.exit(main(sys.argv[1:]))')
+
+
+def _references_only(site, models, *args, torch=True):
+    argv = ['--folder', models, '--survey', site / 'survey.csv',
+            '--ap-window', '1', *args]
+    if torch:
+        return run(python_module('cli.update_model', '--positions-only',
+                                 *argv))
+    return run([sys.executable, '-c', NO_TORCH, *map(str, argv)])
+
+
+def _report(models, name):
+    return json.loads((models / f'{name}.json').read_text())
+
+
+@pytest.mark.parametrize('torch', [True, False], ids=['asked', 'no-torch'])
+def test_a_references_only_update_fills_the_hole(site, tmp_path, torch):
+    models = tmp_path / 'models'
+    models.mkdir()
+    result = _references_only(site, models, '--model', site / 'in_use.npz',
+                              '--recorded', site / 'recorded.csv',
+                              torch=torch)
+    assert result.returncode == 0, result.stderr
+    assert 'Traceback' not in result.stderr
+    notes = [line for line in result.stderr.splitlines()
+             if 'torch' in line]
+    if torch:
+        assert notes == [], result.stderr
+    else:
+        assert len(notes) == 1 and notes[0].startswith(
+            'note: training needs torch') and notes[0].endswith(
+                'updating only the position references (numpy)'), notes
+    adopted, first = _history(models)
+    report = _report(models, first)
+    assert report['decision'] == 'put in use', report
+    assert report['protocol']['update'].startswith('references only'), \
+        report['protocol']
+    assert report['protocol']['held_out_scans'] == 60
+    assert report['candidate']['position_mean_error_m'] < \
+        report['in_use']['position_mean_error_m'] - 1.0, report
+    assert report['candidate']['references']['recorded']['used'] == 240
+    assert report['cost']['torch_threads'] is None
+    # the APs that came and went are reported, not applied
+    aps = report['access_points']
+    assert [s['ap'] for s in aps['silent']] == [mac(i) for i in range(3)]
+    assert aps['new'] == [mac(i).lower() for i in range(30, 33)]
+    assert aps['left_out'] == [] and 'not learned' in aps['not_applied']
+    in_use, model = (load_model(site / 'in_use.npz'),
+                     load_model(models / 'current.npz'))
+    assert model.ap_ids == in_use.ap_ids
+    for a, b in zip(in_use.members[0], model.members[0]):
+        assert np.array_equal(a.weight, b.weight)
+        assert np.array_equal(a.bias, b.bias)
+    assert model.provenance[PROVENANCE]['from'] == str(site / 'in_use.npz')
+    assert len(model.position.xy) == 300 + 240
+
+
+def test_a_worse_references_only_candidate_is_refused(site, tmp_path):
+    # recorded while the localiser was lost: the positions of the scans
+    # trained on are each other's; the newest (held out) are right
+    models = tmp_path / 'models'
+    models.mkdir()
+    result = _references_only(site, models, '--model', site / 'in_use.npz',
+                              '--recorded', site / 'lost.csv')
+    assert result.returncode == 1, result.stderr
+    assert result.stderr.splitlines()[-1].startswith(
+        'refused: worse than the model in use on the held-out scans: '
+        'mean position error'), result.stderr
+    assert not (models / 'current').exists()
+    refused, = models.glob('*-refused.json')
+    report = json.loads(refused.read_text())
+    assert report['protocol']['update'].startswith('references only')
+    assert report['candidate']['position_mean_error_m'] > \
+        report['in_use']['position_mean_error_m'] + 5.0, report
+
+
+def _off_survey_bounds(site):
+    """Return the recorded scans trained on beyond 28 m and beyond 25 m."""
+    recorded = read_fingerprints(site / 'recorded.csv')
+    x = recorded.position[~newest(recorded.meta['TIMESTAMP'],
+                                  len(recorded)), 0]
+    return int((x > 25.0 + 3.0).sum()), int((x > 25.0).sum())
+
+
+def test_too_little_new_ground_builds_nothing(site, tmp_path):
+    models = tmp_path / 'models'
+    models.mkdir()
+    args = ('--model', site / 'in_use.npz', '--recorded',
+            site / 'recorded.csv')
+    result = _references_only(site, models, *args, '--min-new-scans',
+                              '1000')
+    assert result.returncode == 0, result.stderr
+    line, = result.stdout.splitlines()
+    assert line.startswith('not updated: ') and line.endswith(
+        'fewer than --min-new-scans 1000; nothing built'), line
+    found = int(line.split()[2])
+    beyond, off = _off_survey_bounds(site)
+    assert beyond <= found <= off, (beyond, found, off)
+    assert list(models.iterdir()) == []
+    result = _references_only(site, models, *args, '--min-new-scans',
+                              str(found + 1))
+    assert result.returncode == 0 and list(models.iterdir()) == []
+    assert f'not updated: {found} recorded scans' in result.stdout
+    # just enough: built, the count in its report
+    result = _references_only(site, models, *args, '--min-new-scans',
+                              str(found))
+    assert result.returncode == 0, result.stderr
+    report = _report(models, _history(models)[-1])
+    assert report['new_ground']['scans'] == found
+    assert report['new_ground']['min_new_scans'] == found
+    result = _references_only(site, models, '--recorded',
+                              site / 'recorded.csv', '--min-new-scans', '-1')
+    assert result.returncode == 2
+    assert result.stderr.splitlines()[-1].startswith(
+        'error: --min-new-scans -1'), result.stderr

@@ -3,12 +3,17 @@
 
 At low priority (``--nice``, torch on ``--threads``), the survey and the
 scans the robot recorded (trusted_recorder's CSVs) train a candidate with
-the package's trainer; the newest share of the recorded scans is held out
-of its training and scores it beside the model in use
-(:mod:`..core.update_check`). A candidate not worse is kept in the models
-folder and put in use (:mod:`..core.model_store`), else refused with its
-reason (exit 1); either way the report says what was compared, how, and
-which APs came and went. ``--rollback`` puts the previous model back.
+the package's trainer; with ``--positions-only``, or where torch cannot be
+imported, the candidate is the model in use with those scans as its
+position references (:mod:`..core.references`, numpy only). The newest
+share of the recorded scans is held out of the candidate and scores it
+beside the model in use (:mod:`..core.update_check`). A candidate not
+worse is kept in the models folder and put in use
+(:mod:`..core.model_store`), else refused with its reason (exit 1); either
+way the report says what kind of update it was, what was compared, how,
+and which APs came and went. With ``--min-new-scans N``, fewer than N
+recorded scans off the survey build nothing. ``--rollback`` puts the
+previous model back.
 """
 
 import argparse
@@ -26,10 +31,13 @@ from ..core.artifact import load_model, save_model
 from ..core.atomic import probe_folder
 from ..core.evaluation import evaluate
 from ..core.model_store import ModelStore, StoreError
+from ..core.coverage import COVERED_M
 from ..core.pipeline.scan_pipeline import swap_problem
+from ..core.references import with_references
 from ..core.scan import normalize_ap_id, ScanMapper
 from ..core.update_check import (ap_changes, HOLDOUT_SHARE, MIN_HELD_OUT,
-                                 newest, scores, Tolerance, verdict)
+                                 newest, off_survey, scores, Tolerance,
+                                 verdict)
 from ..data.columns import distinct_aps, TIME
 from ..data.fingerprints import Fingerprints
 from ..training.config import TrainConfig
@@ -63,6 +71,15 @@ def build_parser():
     p.add_argument('--model', type=Path,
                    help='the model in use, for a folder that has none yet '
                         '(kept there first when a candidate is put in use)')
+    p.add_argument('--positions-only', action='store_true',
+                   help='no training: the model in use with the survey and '
+                        'the recorded scans as its position references '
+                        '(numpy only; also what happens without torch)')
+    p.add_argument('--min-new-scans', type=int, default=0, metavar='N',
+                   help=f'build nothing (exit 0) unless at least N recorded '
+                        f'scans are new ground: farther than {COVERED_M:g} '
+                        f'm from every survey scan of their floor (default: '
+                        f'%(default)s, always build)')
     p.add_argument('--holdout', type=float, default=HOLDOUT_SHARE,
                    help='share of the recorded scans held out, the newest '
                         '(default: %(default)s)')
@@ -178,6 +195,9 @@ def main(argv=None):
         if args.nice < 0:
             raise ValueError(f'--nice {args.nice}: must be >= 0 (only '
                              f'lowering the priority needs no privilege)')
+        if args.min_new_scans < 0:
+            raise ValueError(f'--min-new-scans {args.min_new_scans}: must '
+                             f'be >= 0')
         return _update(args, store)
     except StoreError as exc:
         raise ValueError(str(exc)) from None
@@ -187,6 +207,7 @@ def _update(args, store):
     os.nice(args.nice)
     start = time.monotonic()
     config = training_config(args)
+    train = _trainer(args)
     in_use_path = _in_use(store, args.model)
     in_use = load_model(in_use_path)
     data = data_options(args)
@@ -196,16 +217,31 @@ def _update(args, store):
                          small_classes='keep')
     stamps = recorded.meta.get(TIME)
     held = newest(stamps, len(recorded), args.holdout)
+    learned = recorded.subset(~held)
+    new = _new_ground(args, learned, survey)
+    if new is not None and new < args.min_new_scans:
+        print(f'not updated: {new} recorded scans off the survey (farther '
+              f'than {COVERED_M:g} m from every survey scan of their floor),'
+              f' fewer than --min-new-scans {args.min_new_scans}; nothing '
+              f'built')
+        return 0
     if held.sum() < MIN_HELD_OUT:
         raise ValueError(f'--recorded: {len(recorded)} scans, {held.sum()} '
                          f'held out: at least {MIN_HELD_OUT} are needed to '
                          f'judge a candidate; record more')
     changes = ap_changes(in_use.ap_ids, recorded.ap_ids, recorded.rssi,
                          stamps, args.ap_window * 3600.0)
-    leave_out = [] if args.keep_aps else [s['ap'] for s in changes['silent']]
-    fp = together(survey, recorded.subset(~held), leave_out)
-    print(fp.summary(), file=sys.stderr, flush=True)
-    candidate, _, training = trainer()(fp, config, _log(args))
+    if train is None:
+        candidate, kind, built = _referenced(in_use, in_use_path, survey,
+                                             learned)
+        changes['not_applied'] = 'a references-only update keeps the ' \
+            'model\'s APs: new APs not learned, silent APs not left out'
+        leave_out = []
+    else:
+        leave_out = [] if args.keep_aps else \
+            [s['ap'] for s in changes['silent']]
+        candidate, kind, built = _trained(args, train, config, survey,
+                                          learned, leave_out)
     test = recorded.subset(held)
     figures = {'in_use': scores(evaluate(in_use, test)),
                'candidate': scores(evaluate(candidate, test))}
@@ -219,6 +255,7 @@ def _update(args, store):
         'decision': 'put in use' if ok else 'refused', 'reason': reason,
         'created': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
         'protocol': {
+            'update': kind,
             'held_out': f'the newest {args.holdout:g} of the recorded scans '
                         f'by {"TIMESTAMP" if stamps is not None else "row"}'
                         f', not trained on',
@@ -227,22 +264,26 @@ def _update(args, store):
                       'mapping their APs as the node does',
             'tolerance': {'building_floor_accuracy': tolerance.accuracy,
                           'position_mean_error_m': tolerance.position_m}},
+        'new_ground': {
+            'scans': new, 'min_new_scans': args.min_new_scans,
+            'rule': f'recorded scans not held out, farther than '
+                    f'{COVERED_M:g} m from every survey scan of their '
+                    f'building and floor'},
         'in_use': {'file': str(in_use_path), **figures['in_use']},
-        'candidate': {**figures['candidate'], 'training': {
-            'survey': survey.source, 'survey_scans': len(survey),
-            'recorded': recorded.source,
-            'recorded_scans': len(fp) - len(survey),
-            'aps': len(candidate.ap_ids), 'epochs': training.epochs,
-            'seconds': round(training.seconds, 1)}},
+        'candidate': {**figures['candidate'], **built},
         'access_points': {**changes, 'left_out': leave_out},
         'cost': {'seconds': round(time.monotonic() - start, 1),
                  'cpu_seconds': round(used.ru_utime + used.ru_stime, 1),
                  'max_rss_mib': round(used.ru_maxrss / 1024, 1),
-                 'nice': os.nice(0), 'torch_threads': config.threads}}
+                 'nice': os.nice(0),
+                 'torch_threads': None if train is None else config.threads}}
     print(f'held out {held.sum()} recorded scans: in use '
           f'{_line(figures["in_use"])}; candidate '
           f'{_line(figures["candidate"])}; APs: {len(changes["silent"])} '
-          f'silent, {len(changes["new"])} new', file=sys.stderr)
+          f'silent, {len(changes["new"])} new'
+          f'{" (not applied)" if train is None else ""}'
+          f'{"" if new is None else f"; {new} scans off the survey"}',
+          file=sys.stderr)
     if not ok:
         path = store.refused(report)
         print(f'refused: {reason} (report {path})', file=sys.stderr)
@@ -260,6 +301,56 @@ def _update(args, store):
           f'for the running nodes:')
     print('\n'.join(_param_lines(path)))
     return 0
+
+
+def _trainer(args):
+    """Return the trainer, or None for a references-only update."""
+    if args.positions_only:
+        return None
+    try:
+        return trainer()
+    except ValueError as exc:   # no torch here
+        print(f'note: {exc} to retrain; updating only the position '
+              f'references (numpy)', file=sys.stderr, flush=True)
+        return None
+
+
+def _new_ground(args, learned, survey):
+    """Return how many recorded scans (trained on) are off the survey."""
+    if args.min_new_scans or (learned.position is not None and
+                              survey.position is not None):
+        try:
+            return int(off_survey(learned, survey).sum())
+        except ValueError as exc:
+            raise ValueError(f'--min-new-scans {args.min_new_scans}: '
+                             f'{exc}') from None
+    return None
+
+
+def _trained(args, train, config, survey, learned, leave_out):
+    """Return (candidate, its kind, its training) trained anew."""
+    fp = together(survey, learned, leave_out)
+    print(fp.summary(), file=sys.stderr, flush=True)
+    candidate, _, training = train(fp, config, _log(args))
+    return candidate, 'full: network and position references trained ' \
+        'anew (training/trainer.py)', {'training': {
+            'survey': survey.source, 'survey_scans': len(survey),
+            'recorded': learned.source,
+            'recorded_scans': len(fp) - len(survey),
+            'aps': len(candidate.ap_ids), 'epochs': training.epochs,
+            'seconds': round(training.seconds, 1)}}
+
+
+def _referenced(in_use, path, survey, learned):
+    """Return (candidate, its kind, its references): references only."""
+    start = time.monotonic()
+    candidate, parts = with_references(in_use, [survey, learned], str(path))
+    return candidate, 'references only: the model in use\'s network and ' \
+        'APs kept, its position references the survey plus the recorded ' \
+        'scans (core/references.py)', {'references': {
+            'from': str(path), 'survey': parts[0], 'recorded': parts[1],
+            'aps': len(candidate.ap_ids),
+            'seconds': round(time.monotonic() - start, 1)}}
 
 
 def _line(figures):

@@ -9,12 +9,15 @@ scans): building+floor accuracy and mean position error, each with a small
 tolerance. :func:`ap_changes` lists the APs of the model in use not heard
 in the recorded scans for longer than a window (retired or moved: they
 stop counting) and the APs heard that it does not know (new).
+:func:`off_survey` says which recorded scans are new ground: whether an
+update is worth building.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
+from .coverage import COVERED_M, distance_to_survey
 from .scan import normalize_ap_id
 
 #: The share of the recorded scans held out (the newest).
@@ -123,3 +126,25 @@ def ap_changes(model_aps, recorded_aps, rssi, stamps, window_s):
         if last is None or last < end - window_s:
             result['silent'].append({'ap': ap, 'last_heard': last})
     return result
+
+
+def off_survey(recorded, survey):
+    """
+    Return which recorded scans are new ground (a boolean mask).
+
+    Farther than :data:`.coverage.COVERED_M` from every survey scan of
+    their building and floor. ``recorded``, ``survey``: fingerprints with
+    positions (``building``, ``floor``, ``position``).
+    """
+    for name, scans in (('recorded', recorded), ('survey', survey)):
+        if scans.position is None:
+            raise ValueError(f'the {name} scans have no positions (X, Y): '
+                             f'new ground cannot be told')
+    off = np.zeros(len(recorded.building), bool)
+    places = set(zip(recorded.building.tolist(), recorded.floor.tolist()))
+    for b, f in places:
+        mine = (recorded.building == b) & (recorded.floor == f)
+        theirs = (survey.building == b) & (survey.floor == f)
+        off[mine] = distance_to_survey(recorded.position[mine],
+                                       survey.position[theirs]) > COVERED_M
+    return off
