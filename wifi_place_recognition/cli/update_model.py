@@ -54,9 +54,11 @@ def build_parser():
     p = argparse.ArgumentParser(
         allow_abbrev=False, prog='update_model',
         description='Train a candidate model from the survey plus the '
-                    'recorded scans at low priority, check it against the '
-                    'model in use on the newest recorded scans (held out), '
-                    'keep and put in use the one not worse; or roll back.')
+                    'recorded scans at low priority (without torch, or with '
+                    '--positions-only: the model in use with them as its '
+                    'position references), check it against the model in '
+                    'use on the newest recorded scans (held out), keep and '
+                    'put in use the one not worse; or roll back.')
     p.add_argument('--folder', type=Path, required=True,
                    help='the models folder: every model put in use with its '
                         'report, current (the order they were put in use), '
