@@ -10,8 +10,8 @@ HERE = LocaliserPose(100.0, 5.0, 5.0, 0.0, 'map', 0.1)
 
 
 def verdict(stamp=100.5, pose=HERE, last_jump=None, witness='agrees',
-            place=(0, 1)):
-    return untrusted(stamp, pose, last_jump, witness, place, P)
+            place=(0, 1), confirmed=True):
+    return untrusted(stamp, pose, last_jump, witness, place, P, confirmed)
 
 
 def test_a_confident_localiser_labels_the_scan_also_where_wifi_cannot_tell():
@@ -33,8 +33,11 @@ def test_nothing_is_trusted_while_lost_waiting_or_uncertain():
     assert verdict(last_jump=100.5 - P.settle_s + 0.1) == 'jumped'
     assert verdict(last_jump=100.5 - P.settle_s - 0.1) is None
     assert verdict(last_jump=101.0) == 'jumped'   # since the scan
+    # settled, but WiFi has not agreed since the jump
+    assert verdict(last_jump=100.5 - P.settle_s - 0.1,
+                   confirmed=False) == 'unconfirmed'
     assert set(REASONS) == {'no_place', 'witness_waiting', 'lost', 'disagrees',
-                            'no_pose', 'uncertain', 'jumped'}
+                            'no_pose', 'uncertain', 'jumped', 'unconfirmed'}
 
 
 def test_a_jump_is_a_step_faster_than_driving_or_another_frame():
@@ -64,6 +67,18 @@ def test_the_gate_labels_a_scan_with_the_poses_around_it_and_its_witness():
     jumped = replace(HERE, stamp=102.0, x=20.0)
     assert gate.pose(jumped).x == 6.0       # the pose before the jump
     assert [r[-1] for r in gate.release()] == ['lost', 'jumped']
-    gate.scan(102.0 + P.settle_s + 0.5, 'd')
-    gate.pose(replace(jumped, stamp=102.0 + P.settle_s + 1))
-    assert [r[-1] for r in gate.release()] == [None]
+    # agreeing before settle_s confirms nothing (a comparison made before
+    # the jump may still say so); settled, WiFi cannot tell: not yet
+    settled = 102.0 + P.settle_s
+    gate.witness = 'agrees'
+    gate.scan(settled - 0.5, 'd')
+    gate.witness = 'cannot_tell'
+    gate.scan(settled + 0.5, 'e')
+    gate.witness = 'agrees'
+    gate.pose(replace(jumped, stamp=settled + 1))
+    assert [r[-1] for r in gate.release()] == ['jumped', 'unconfirmed']
+    gate.scan(settled + 1.5, 'f')      # agrees, settled: confirmed
+    gate.witness = 'cannot_tell'
+    gate.scan(settled + 2.5, 'g')      # and stays so
+    gate.pose(replace(jumped, stamp=settled + 3))
+    assert [r[-1] for r in gate.release()] == [None, None]

@@ -6,8 +6,9 @@ latched ``~/status``), classifier_node (its latched ``~/current_place``)
 and the scanner, one scan a second just after each localiser pose; the
 recorder runs in its own process. Phases: the witness agrees (recorded),
 says lost (not), cannot tell (recorded: a survey hole), agrees while the
-localiser's covariance is large (not), the localiser jumps 10 m (nothing
-for ``settle_s`` seconds, then recorded again). The CSV must hold exactly
+localiser's covariance is large (not), the localiser jumps 10 m while
+the witness cannot tell (nothing for ``settle_s`` seconds, nor after
+until the witness agrees), agrees (recorded). The CSV must hold exactly
 the trusted scans, labelled with the localiser's pose interpolated
 between the poses around it (the last, held until the recorder stops:
 the pose before it) and the current place.
@@ -27,14 +28,14 @@ from wifi_place_recognition.ros.messages import key_value, status_values
 
 T0 = 7000.0
 NAME = 'trusted_node'
-#: (witness state, localiser sd m, offset m) of each phase, 4 scans each;
-#: the jump's phase twice as long (settle_s 5 s).
-PHASES = [('agrees', 0.1, 0.0), ('lost', 0.1, 0.0),
-          ('cannot_tell', 0.1, 0.0), ('agrees', 0.5, 0.0),
-          ('agrees', 0.1, 10.0), ('agrees', 0.1, 10.0)]
-#: The last scan of the cannot_tell phase is not: its label comes from
-#: the pose after it too, of the uncertain phase.
-RECORDED = [0, 1, 2, 3, 8, 9, 10, 21, 22, 23]
+#: (witness state, localiser sd m, offset m, scans) of each phase; the
+#: jump's phase 12 scans (settle_s 10 s, then 2 scans unconfirmed).
+PHASES = [('agrees', 0.1, 0.0, 4), ('lost', 0.1, 0.0, 4),
+          ('cannot_tell', 0.1, 0.0, 4), ('agrees', 0.5, 0.0, 4),
+          ('cannot_tell', 0.1, 10.0, 12), ('agrees', 0.1, 10.0, 4)]
+#: The last scan of the first cannot_tell phase is not: its label comes
+#: from the pose after it too, of the uncertain phase.
+RECORDED = [0, 1, 2, 3, 8, 9, 10, 28, 29, 30, 31]
 
 
 class Recorder:
@@ -102,9 +103,9 @@ def test_scans_are_recorded_while_trusted_also_where_wifi_cannot_tell(
             key_value('frame_id', 'map')])]))
     r.wait_for('place', 'B0F1')
     k = 0
-    for state, sd, offset in PHASES:
+    for state, sd, offset, scans in PHASES:
         r.say(state)
-        for _ in range(4):
+        for _ in range(scans):
             r.step(k, sd, offset)
             k += 1
     r.wait_for('scans_received', k)
@@ -124,7 +125,8 @@ def test_scans_are_recorded_while_trusted_also_where_wifi_cannot_tell(
             ('0', '1', 'map'), row
     assert values['skipped/lost'] == '4', values
     assert values['skipped/uncertain'] == '5', values
-    assert values['skipped/jumped'] == '5', values
+    assert values['skipped/jumped'] == '10', values
+    assert values['skipped/unconfirmed'] == '2', values
     assert values['localizer_jumps'] == '1', values
     assert 'not recording: the WiFi witness says the localiser is lost' \
         in log and 'the localiser jumped 10.50 m in 1.00 s' in log, log

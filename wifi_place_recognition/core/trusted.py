@@ -13,7 +13,12 @@ witness (localization_monitor's state) must say neither ``lost`` nor
 ``disagrees`` (evidence against the localiser gathering), and must have
 started (not ``waiting``). Its ``cannot_tell`` does not block:
 inside a survey hole WiFi cannot testify, and that is where recording
-matters. The building and floor come from the current place; with none
+matters; except after a jump: a jump may be a correction or the
+localiser going wrong, and only WiFi can tell which, so after one
+nothing is recorded until the witness says ``agrees`` at least
+``settle_s`` after it (``settle_s`` no shorter than the witness's
+``max_age``, 10 s, for which an earlier comparison still says
+``agrees``). The building and floor come from the current place; with none
 yet, nothing is trusted. :class:`TrustGate` applies the rule live, to
 the streams as they come (what trusted_recorder runs, and the
 self-update benchmark offline).
@@ -34,6 +39,7 @@ REASONS = {
     'no_pose': 'no localiser pose near the scan in time',
     'uncertain': 'the localiser is not sure of its pose',
     'jumped': 'the localiser jumped a moment ago',
+    'unconfirmed': 'the localiser jumped and WiFi has not agreed since',
 }
 
 
@@ -44,7 +50,7 @@ class TrustParams:
     max_sd: float = 0.2         # m: largest x or y standard deviation
     jump_m: float = 0.5         # m beyond what max_speed covers: a jump
     max_speed: float = 1.0      # m/s the robot can drive
-    settle_s: float = 5.0       # s after a jump: nothing trusted
+    settle_s: float = 10.0      # s after a jump: nothing trusted
     max_pose_age: float = MAX_POSE_AGE  # s between a scan and its poses
 
 
@@ -80,7 +86,8 @@ def is_jump(before, after, params):
     return step > params.jump_m + driven
 
 
-def untrusted(stamp, pose, last_jump, witness, place, params):
+def untrusted(stamp, pose, last_jump, witness, place, params,
+              confirmed=True):
     """
     Return why the scan taken at ``stamp`` (s) is not trusted, or None.
 
@@ -88,8 +95,10 @@ def untrusted(stamp, pose, last_jump, witness, place, params):
     :mod:`.pose_label` (its sd the larger of the poses it comes from;
     None: no pose labels it); ``last_jump``: the stamp of its newest jump
     (None: none); ``witness``: the WiFi witness's state (None: not heard
-    yet); ``place``: the current (building, floor) or None. The reason is
-    a key of :data:`REASONS`.
+    yet); ``place``: the current (building, floor) or None; ``confirmed``:
+    whether the witness agreed with the localiser, ``settle_s`` or more
+    after its last jump, before the scan. The reason is a key of
+    :data:`REASONS`.
     """
     if place is None:
         return 'no_place'
@@ -102,6 +111,8 @@ def untrusted(stamp, pose, last_jump, witness, place, params):
         return 'uncertain'
     if last_jump is not None and last_jump >= stamp - params.settle_s:
         return 'jumped'
+    if not confirmed:
+        return 'unconfirmed'
     return None
 
 
@@ -122,6 +133,7 @@ class TrustGate:
         self.params = params
         self.held = HeldScans()
         self.last_jump = None       # stamp of the localiser's newest jump
+        self.confirmed = True       # the witness agreed since that jump
         self.witness = None         # the witness's state (None: not heard)
         self.place = None           # (building, floor) or None
 
@@ -134,14 +146,17 @@ class TrustGate:
         old = self.held.poses[-1] if self.held.poses else None
         jumped = old is not None and is_jump(old, new, self.params)
         if jumped:
-            self.last_jump = new.stamp
+            self.last_jump, self.confirmed = new.stamp, False
         self.held.add_pose(new)
         return old if jumped else None
 
     def scan(self, stamp, scan):
         """Hold ``scan`` (anything), taken at ``stamp`` (s)."""
-        self.held.hold(stamp, (scan, self.witness, self.place),
-                       self.params.max_pose_age)
+        if not self.confirmed and self.witness == AGREES and \
+                stamp >= self.last_jump + self.params.settle_s:
+            self.confirmed = True
+        self.held.hold(stamp, (scan, self.witness, self.place,
+                               self.confirmed), self.params.max_pose_age)
 
     def release(self, everything=False):
         """
@@ -153,14 +168,14 @@ class TrustGate:
         also those still waiting for a pose (a stop).
         """
         out = []
-        for stamp, (scan, witness, place), label in self.held.release(
-                self.params.max_pose_age, everything):
+        ready = self.held.release(self.params.max_pose_age, everything)
+        for stamp, (scan, witness, place, confirmed), label in ready:
             pose = None
             if label is not None:
                 before, after, w = label
                 pose = LocaliserPose(stamp, *blend(before, after, w),
                                      before.frame, max(before.sd, after.sd))
             why = untrusted(stamp, pose, self.last_jump, witness, place,
-                            self.params)
+                            self.params, confirmed)
             out.append((stamp, scan, pose, place, why))
         return out

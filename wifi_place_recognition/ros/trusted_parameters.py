@@ -17,7 +17,7 @@ pose (x, y, yaw, frame) and classifier_node's current building and floor,
 but only while the localiser is trusted: its pose sure (max_sd), no jump
 in the last settle_s seconds, and localization_monitor saying neither
 lost nor disagrees (cannot_tell does not stop it: inside a survey hole
-WiFi cannot testify).
+WiFi cannot testify; but after a jump, nothing until it says agrees).
 Every scan left out is counted by reason.
 """
 
@@ -72,7 +72,8 @@ PARAMETERS = (
     _number('max_speed', _D.max_speed, 100.0, 'm/s: the robot\'s top speed'),
     _number('settle_s', _D.settle_s, 3600.0,
             's: after a jump of the localiser, no scan is recorded for this '
-            'long'),
+            'long, and then only once localization_monitor says agrees '
+            '(keep it >= its max_age)'),
     _number('max_pose_age', _D.max_pose_age, 3600.0,
             's: the localiser\'s poses before and after a scan label it, '
             'interpolated, when both are this close to it in time; else the '
