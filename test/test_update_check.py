@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from wifi_place_recognition.core import model_store
 from wifi_place_recognition.core.model_store import ModelStore, StoreError
-from wifi_place_recognition.core.update_check import (ap_changes, newest,
-                                                      off_survey, Tolerance,
-                                                      verdict)
+from wifi_place_recognition.core.update_check import (
+    ap_changes, MIN_HELD_OUT, newest, off_survey, position_judges, Tolerance,
+    verdict)
 
 IN_USE = {'building_floor_accuracy': 0.90, 'position_mean_error_m': 3.0}
 
@@ -86,6 +86,20 @@ def test_new_ground_is_off_every_survey_scan_of_its_own_floor():
         off_survey(recorded, SimpleNamespace(building=np.array([0]),
                                              floor=np.array([0]),
                                              position=None))
+
+
+def test_the_position_is_judged_where_the_candidate_learned():
+    survey = _places([0, 0], [0, 0], [[0, 0], [10, 0]])
+    recorded = _places([0], [0], [[40, 0]])
+    n = MIN_HELD_OUT + 2
+    # near the survey, near the recorded scan, on ground nobody learned
+    x = [1.0] * (n - 4) + [2.0, 41.0, 25.0, 60.0]
+    held = _places([0] * n, [0] * n, [[v, 0] for v in x])
+    assert position_judges(held, [survey, recorded]).tolist() == \
+        [True] * (n - 2) + [False, False]
+    # too few where it learned: every held-out scan judges
+    few = _places([0] * n, [0] * n, [[25.0, 0]] * (n - 3) + [[0, 0]] * 3)
+    assert position_judges(few, [survey, recorded]).all()
 
 
 def _model(tmp_path, name, content):

@@ -268,7 +268,9 @@ def test_a_references_only_update_fills_the_hole(site, tmp_path, torch):
         assert np.array_equal(a.weight, b.weight)
         assert np.array_equal(a.bias, b.bias)
     assert model.provenance[PROVENANCE]['from'] == str(site / 'in_use.npz')
-    assert len(model.position.xy) == 300 + 240
+    # checked without the held-out scans, put in use with them
+    assert report['put_in_use']['references']['recorded']['used'] == 300
+    assert len(model.position.xy) == 300 + 300
 
 
 def test_a_worse_references_only_candidate_is_refused(site, tmp_path):

@@ -8,7 +8,8 @@ imported, the candidate is the model in use with those scans as its
 position references (:mod:`..core.references`, numpy only). The newest
 share of the recorded scans is held out of the candidate and scores it
 beside the model in use (:mod:`..core.update_check`). A candidate not
-worse is kept in the models folder and put in use
+worse is built again by the same recipe from every recorded scan (the
+held-out ones too), kept in the models folder and put in use
 (:mod:`..core.model_store`), else refused with its reason (exit 1); either
 way the report says what kind of update it was, what was compared, how,
 and which APs came and went. With ``--min-new-scans N``, fewer than N
@@ -29,15 +30,14 @@ import numpy as np
 
 from ..core.artifact import load_model, save_model
 from ..core.atomic import probe_folder
-from ..core.evaluation import evaluate
 from ..core.model_store import ModelStore, StoreError
 from ..core.coverage import COVERED_M
 from ..core.pipeline.scan_pipeline import swap_problem
 from ..core.references import with_references
 from ..core.scan import normalize_ap_id, ScanMapper
-from ..core.update_check import (ap_changes, HOLDOUT_SHARE, MIN_HELD_OUT,
-                                 newest, off_survey, scores, Tolerance,
-                                 verdict)
+from ..core.update_check import (ap_changes, HOLDOUT_SHARE, judged,
+                                 MIN_HELD_OUT, newest, off_survey,
+                                 position_judges, Tolerance, verdict)
 from ..data.columns import distinct_aps, TIME
 from ..data.fingerprints import Fingerprints
 from ..training.config import TrainConfig
@@ -234,24 +234,33 @@ def _update(args, store):
     changes = ap_changes(in_use.ap_ids, recorded.ap_ids, recorded.rssi,
                          stamps, args.ap_window * 3600.0)
     if train is None:
-        candidate, kind, built = _referenced(in_use, in_use_path, survey,
-                                             learned)
         changes['not_applied'] = 'a references-only update keeps the ' \
             'model\'s APs: new APs not learned, silent APs not left out'
         leave_out = []
     else:
         leave_out = [] if args.keep_aps else \
             [s['ap'] for s in changes['silent']]
-        candidate, kind, built = _trained(args, train, config, survey,
-                                          learned, leave_out)
+
+    def build(scans):
+        if train is None:
+            return _referenced(in_use, in_use_path, survey, scans)
+        return _trained(args, train, config, survey, scans, leave_out)
+    candidate, kind, built = build(learned)
     test = recorded.subset(held)
-    figures = {'in_use': scores(evaluate(in_use, test)),
-               'candidate': scores(evaluate(candidate, test))}
+    judges = position_judges(test, [survey, learned])
+    figures = {'in_use': judged(in_use, test, judges),
+               'candidate': judged(candidate, test, judges)}
     tolerance = Tolerance(args.tolerance_accuracy, args.tolerance_position)
     ok, reason = verdict(figures['in_use'], figures['candidate'], tolerance)
     swap = swap_problem(in_use, candidate)
     if ok and swap:     # the running nodes would refuse it
         ok, reason = False, swap
+    final = None
+    if ok:      # the same recipe, the held-out scans learned too
+        final, _, final_built = build(recorded)
+        swap = swap_problem(in_use, final)
+        if swap:
+            ok, reason = False, swap
     used = resource.getrusage(resource.RUSAGE_SELF)
     report = {
         'decision': 'put in use' if ok else 'refused', 'reason': reason,
@@ -263,7 +272,13 @@ def _update(args, store):
                         f', not trained on',
             'held_out_scans': int(held.sum()),
             'scores': 'core/evaluation.py on the held-out scans, each model '
-                      'mapping their APs as the node does',
+                      'mapping their APs as the node does: building and '
+                      'floor on all, the position on those within '
+                      f'{COVERED_M:g} m of a scan the candidate learned from '
+                      f'(all when fewer than {MIN_HELD_OUT})',
+            'put_in_use': 'a candidate not worse is built again by the same '
+                          'recipe from the survey and every recorded scan, '
+                          'the held-out ones too',
             'tolerance': {'building_floor_accuracy': tolerance.accuracy,
                           'position_mean_error_m': tolerance.position_m}},
         'new_ground': {
@@ -273,6 +288,7 @@ def _update(args, store):
                     f'building and floor'},
         'in_use': {'file': str(in_use_path), **figures['in_use']},
         'candidate': {**figures['candidate'], **built},
+        'put_in_use': None if final is None else final_built,
         'access_points': {**changes, 'left_out': leave_out},
         'cost': {'seconds': round(time.monotonic() - start, 1),
                  'cpu_seconds': round(used.ru_utime + used.ru_stime, 1),
@@ -297,7 +313,7 @@ def _update(args, store):
                                     'source': str(in_use_path)})
     with tempfile.TemporaryDirectory(dir=args.folder,
                                      prefix='.candidate.') as tmp:
-        save_model(candidate, Path(tmp) / 'candidate.npz')
+        save_model(final, Path(tmp) / 'candidate.npz')
         path = store.install(Path(tmp) / 'candidate.npz', report)
     print(f'put in use: {path} (report {path.with_suffix(".json").name}); '
           f'for the running nodes:')

@@ -4,8 +4,9 @@ A candidate model against the model in use, and the APs that came and went.
 A model rebuilt from the survey plus the scans a robot recorded since must
 not be worse than the one in use where it matters now: on the newest
 recorded scans, held out of its training (:func:`newest`). :func:`verdict`
-compares the two models' scores (:func:`.evaluation.evaluate` on those
-scans): building+floor accuracy and mean position error, each with a small
+compares the two models' scores (:func:`judged`): building+floor accuracy
+on every held-out scan, mean position error on those taken where the
+candidate learned (:func:`position_judges`), each with a small
 tolerance. :func:`ap_changes` lists the APs of the model in use not heard
 in the recorded scans for longer than a window (retired or moved: they
 stop counting) and the APs heard that it does not know (new).
@@ -18,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .coverage import COVERED_M, distance_to_survey
+from .evaluation import evaluate
 from .scan import normalize_ap_id
 
 #: The share of the recorded scans held out (the newest).
@@ -50,7 +52,7 @@ def newest(stamps, n, share=HOLDOUT_SHARE):
     k = min(max(1, int(round(share * n))), max(n - 1, 1))
     mask = np.zeros(n, bool)
     mask[order[n - k:]] = True
-    return mask
+    return mask if mask.sum() >= MIN_HELD_OUT else np.ones(n, bool)
 
 
 def scores(result):
@@ -148,3 +150,40 @@ def off_survey(recorded, survey):
         off[mine] = distance_to_survey(recorded.position[mine],
                                        survey.position[theirs]) > COVERED_M
     return off
+
+
+def position_judges(held, learned):
+    """
+    Return which held-out scans judge the position (a boolean mask).
+
+    Those within :data:`.coverage.COVERED_M` of a scan of their building
+    and floor the candidate learned from (``learned``: fingerprints, the
+    survey and the recorded scans it was trained on): elsewhere neither
+    model has been and their errors there differ by chance (a stretch the
+    robot drove only at the end of its recording). All of them when fewer
+    than
+    :data:`MIN_HELD_OUT` are, or without positions.
+    """
+    n = len(held.building)
+    if held.position is None or any(p.position is None for p in learned):
+        return np.ones(n, bool)
+    mask = np.zeros(n, bool)
+    for part in learned:
+        mask |= ~off_survey(held, part)
+    return mask if mask.sum() >= MIN_HELD_OUT else np.ones(n, bool)
+
+
+def judged(model, held, judges):
+    """
+    Return the scores of ``model`` on the held-out scans.
+
+    Building and floor on all of ``held``, the position on those of the
+    mask ``judges`` (:func:`position_judges`).
+    """
+    out = scores(evaluate(model, held))
+    if judges.all():
+        return out
+    where = scores(evaluate(model, held.subset(judges)))
+    out.update({k: v for k, v in where.items() if k.startswith('position')})
+    out['position_samples'] = int(judges.sum())
+    return out
