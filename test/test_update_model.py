@@ -4,7 +4,9 @@
 A better candidate put in use, a worse one refused, nothing written on a
 failure, a rollback; the same for a references-only update (asked for, or
 where torch cannot be imported); nothing built with too little new
-ground.
+ground; and over real DDS, a running classifier_node taking an update by
+the printed ``model_path``, untouched by a refused one, and back on the
+previous model after a rollback.
 
 The survey leaves a hole (x > 25 m of a 40 m floor) that the recorded
 scans cover; while recording, three APs of the survey are gone and three
@@ -17,12 +19,14 @@ import sys
 from conftest import FAST, mac, python_module, run
 import numpy as np
 import pytest
+from ros_helpers import running_node
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.references import PROVENANCE
 from wifi_place_recognition.core.scan import normalize_ap_id
 from wifi_place_recognition.core.update_check import newest
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.recording import FingerprintLog
+from wifi_place_recognition.ros.messages import status_values
 
 APS = 33                # 0-29 in the survey; 0-2 gone and 30-32 new later
 SURVEYED, RECORDED = range(30), range(3, 33)
@@ -331,3 +335,52 @@ def test_too_little_new_ground_builds_nothing(site, tmp_path):
     assert result.returncode == 2
     assert result.stderr.splitlines()[-1].startswith(
         'error: --min-new-scans -1'), result.stderr
+
+
+def _param_path(stdout):
+    """Return the model path of the printed ``ros2 param set`` lines."""
+    paths = {line.split()[-1] for line in stdout.splitlines()
+             if line.startswith('ros2 param set /')}
+    assert len(paths) == 1, stdout
+    return paths.pop()
+
+
+def test_an_update_and_its_rollback_reach_a_running_node(ros, site,
+                                                         tmp_path):
+    # a scan in the survey's hole, heard as the recording hears it
+    building, rng = _building(), np.random.default_rng(9)
+    heard = _readings(building, np.array([35.0, 20.0]), 0, RECORDED, rng)
+    names, rssi = list(heard), [float(v) for v in heard.values()]
+    models = tmp_path / 'models'
+    models.mkdir()
+
+    def where(client):
+        values = status_values(client.send(names, rssi))
+        return float(values['scan_x']), float(values['scan_y'])
+    with running_node(ros, tmp_path, site / 'in_use.npz',
+                      'updated_node') as (client, _, _):
+        before = where(client)
+        put = _references_only(site, models, '--model', site / 'in_use.npz',
+                               '--recorded', site / 'recorded.csv')
+        assert put.returncode == 0, put.stderr
+        assert client.set_param('model_path',
+                                _param_path(put.stdout)).successful
+        updated = where(client)
+        # a bad candidate: refused, the running node not touched
+        refused = _references_only(site, models, '--recorded',
+                                   site / 'lost.csv')
+        assert refused.returncode == 1 and 'refused: ' in refused.stderr, \
+            refused.stderr
+        assert where(client) == updated
+        back = run(python_module('cli.update_model', '--folder', models,
+                                 '--rollback'))
+        assert back.returncode == 0, back.stderr
+        assert _param_path(back.stdout) == \
+            str(models / f'{_history(models)[-1]}.npz')
+        assert client.set_param('model_path',
+                                _param_path(back.stdout)).successful
+        rolled_back = where(client)
+    # off by the hole's width before, found after, as before once undone
+    assert before[0] < 26.0, before
+    assert np.hypot(updated[0] - 35.0, updated[1] - 20.0) < 5.0, updated
+    assert rolled_back == before
