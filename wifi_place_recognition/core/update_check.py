@@ -52,7 +52,7 @@ def newest(stamps, n, share=HOLDOUT_SHARE):
     k = min(max(1, int(round(share * n))), max(n - 1, 1))
     mask = np.zeros(n, bool)
     mask[order[n - k:]] = True
-    return mask if mask.sum() >= MIN_HELD_OUT else np.ones(n, bool)
+    return mask
 
 
 def scores(result):
