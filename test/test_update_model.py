@@ -20,8 +20,11 @@ from conftest import FAST, mac, python_module, run
 import numpy as np
 import pytest
 from ros_helpers import running_node
-from wifi_place_recognition.core.artifact import load_model
-from wifi_place_recognition.core.references import PROVENANCE
+from wifi_place_recognition.core.artifact import load_model, save_model
+from wifi_place_recognition.core.filter.particles import FusionParams
+from wifi_place_recognition.cli import update_model
+from wifi_place_recognition.core.references import PROVENANCE, \
+    with_references
 from wifi_place_recognition.core.scan import normalize_ap_id
 from wifi_place_recognition.core.update_check import newest
 from wifi_place_recognition.data.fingerprints import read_fingerprints
@@ -129,14 +132,18 @@ def test_update_refuse_fail_and_roll_back(site, tmp_path):
     models = tmp_path / 'models'
     models.mkdir()
     recorded = site / 'recorded.csv'
+    # the model in use with the robot's odometry fit
+    in_use = load_model(site / 'in_use.npz')
+    in_use.fusion = FusionParams(drift_mean=0.01)
+    save_model(in_use, tmp_path / 'in_use.npz')
     # a candidate that fills the hole: kept and put in use
-    result = _update(site, models, '--model', site / 'in_use.npz',
+    result = _update(site, models, '--model', tmp_path / 'in_use.npz',
                      '--survey', site / 'survey.csv', '--recorded', recorded,
                      '--ap-window', '1')
     assert result.returncode == 0, result.stderr
     adopted, first = _history(models)
     assert (models / f'{adopted}.npz').read_bytes() == \
-        (site / 'in_use.npz').read_bytes()
+        (tmp_path / 'in_use.npz').read_bytes()
     assert (models / 'current.npz').resolve() == models / f'{first}.npz'
     for node in ('classifier_node', 'localization_monitor'):
         assert f'ros2 param set /{node} model_path {models / first}.npz' \
@@ -156,6 +163,12 @@ def test_update_refuse_fail_and_roll_back(site, tmp_path):
     model = load_model(models / 'current.npz')
     assert {normalize_ap_id(ap) for ap in model.ap_ids} == \
         {normalize_ap_id(mac(i)) for i in RECORDED}
+    # retrained on the survey: the robot's odometry fit carried over
+    assert model.fusion == in_use.fusion
+    assert report['candidate']['training']['carried_over'] == \
+        ['fusion', 'tracking']
+    # built again with the held-out scans once checked
+    assert report['put_in_use']['training']['recorded_scans'] == 300
     # a candidate from a survey with its labels shuffled: refused
     before = _history(models)
     result = _update(site, models, '--survey', site / 'poisoned.csv',
@@ -191,7 +204,7 @@ def test_update_refuse_fail_and_roll_back(site, tmp_path):
     assert result.returncode == 0, result.stderr
     assert _history(models) == [adopted]
     assert (models / 'current.npz').read_bytes() == \
-        (site / 'in_use.npz').read_bytes()
+        (tmp_path / 'in_use.npz').read_bytes()
     assert f'model_path {models / adopted}.npz' in result.stdout
     result = run(python_module('cli.update_model', '--folder', models,
                                '--rollback'))
@@ -275,6 +288,33 @@ def test_a_references_only_update_fills_the_hole(site, tmp_path, torch):
     # checked without the held-out scans, put in use with them
     assert report['put_in_use']['references']['recorded']['used'] == 300
     assert len(model.position.xy) == 300 + 300
+
+
+def test_a_failed_rebuild_puts_the_checked_candidate_in_use(
+        site, tmp_path, monkeypatch, capsys):
+    built = []
+
+    def rebuild_fails(model, parts, source):
+        built.append(sum(len(p) for p in parts))
+        if len(built) == 2:
+            raise ValueError('no memory left')
+        return with_references(model, parts, source)
+    monkeypatch.setattr(update_model, 'with_references', rebuild_fails)
+    models = tmp_path / 'models'
+    models.mkdir()
+    code = update_model.main([
+        '--folder', str(models), '--positions-only', '--model',
+        str(site / 'in_use.npz'), '--survey', str(site / 'survey.csv'),
+        '--recorded', str(site / 'recorded.csv'), '--quiet'])
+    assert code == 0 and built == [300 + 240, 300 + 300], built
+    assert 'note: the rebuild with the held-out scans failed (no memory ' \
+        'left); putting the checked candidate in use' in \
+        capsys.readouterr().err
+    report = _report(models, _history(models)[-1])
+    assert report['decision'] == 'put in use'
+    assert 'the checked candidate was put in use' in \
+        report['put_in_use']['note']
+    assert len(load_model(models / 'current.npz').position.xy) == 300 + 240
 
 
 def test_a_worse_references_only_candidate_is_refused(site, tmp_path):

@@ -244,7 +244,8 @@ def _update(args, store):
     def build(scans):
         if train is None:
             return _referenced(in_use, in_use_path, survey, scans)
-        return _trained(args, train, config, survey, scans, leave_out)
+        return _trained(args, train, config, survey, scans, leave_out,
+                        in_use)
     candidate, kind, built = build(learned)
     test = recorded.subset(held)
     judges = position_judges(test, [survey, learned])
@@ -255,12 +256,10 @@ def _update(args, store):
     swap = swap_problem(in_use, candidate)
     if ok and swap:     # the running nodes would refuse it
         ok, reason = False, swap
-    final = None
+    final = final_built = None
     if ok:      # the same recipe, the held-out scans learned too
-        final, _, final_built = build(recorded)
-        swap = swap_problem(in_use, final)
-        if swap:
-            ok, reason = False, swap
+        final, final_built = _rebuilt(build, recorded, in_use, candidate,
+                                      built)
     used = resource.getrusage(resource.RUSAGE_SELF)
     report = {
         'decision': 'put in use' if ok else 'refused', 'reason': reason,
@@ -278,7 +277,9 @@ def _update(args, store):
                       f'(all when fewer than {MIN_HELD_OUT})',
             'put_in_use': 'a candidate not worse is built again by the same '
                           'recipe from the survey and every recorded scan, '
-                          'the held-out ones too',
+                          'the held-out ones too (so the model put in use '
+                          'was trained on them; the checked candidate if '
+                          'that fails)',
             'tolerance': {'building_floor_accuracy': tolerance.accuracy,
                           'position_mean_error_m': tolerance.position_m}},
         'new_ground': {
@@ -345,18 +346,51 @@ def _new_ground(args, learned, survey):
     return None
 
 
-def _trained(args, train, config, survey, learned, leave_out):
-    """Return (candidate, its kind, its training) trained anew."""
+def _rebuilt(build, recorded, in_use, candidate, built):
+    """
+    Return (the model to put in use, how it was built).
+
+    ``build`` (the candidate's recipe) on every recorded scan; the checked
+    candidate itself when that fails or the running nodes would refuse
+    the result (said in how it was built).
+    """
+    try:
+        final, _, final_built = build(recorded)
+        problem = swap_problem(in_use, final)
+    except (ValueError, RuntimeError) as exc:
+        problem = str(exc)
+    if problem is None:
+        return final, final_built
+    print(f'note: the rebuild with the held-out scans failed ({problem}); '
+          f'putting the checked candidate in use', file=sys.stderr)
+    return candidate, dict(built, note=f'the rebuild with the held-out '
+                           f'scans failed ({problem}): the checked '
+                           f'candidate was put in use')
+
+
+def _trained(args, train, config, survey, learned, leave_out, in_use):
+    """
+    Return (candidate, its kind, its training) trained anew.
+
+    The model in use's odometry fit (``fusion``: the robot's, not the
+    survey's) is carried over, and its tracking section when the
+    candidate has the same building/floor classes.
+    """
     fp = together(survey, learned, leave_out)
     print(fp.summary(), file=sys.stderr, flush=True)
     candidate, _, training = train(fp, config, _log(args))
+    candidate.fusion = in_use.fusion
+    same = np.array_equal(candidate.classes, in_use.classes)
+    if same:
+        candidate.tracking = in_use.tracking
     return candidate, 'full: network and position references trained ' \
         'anew (training/trainer.py)', {'training': {
             'survey': survey.source, 'survey_scans': len(survey),
             'recorded': learned.source,
             'recorded_scans': len(fp) - len(survey),
             'aps': len(candidate.ap_ids), 'epochs': training.epochs,
-            'seconds': round(training.seconds, 1)}}
+            'seconds': round(training.seconds, 1),
+            'carried_over': ['fusion'] + (['tracking'] if same else [])}}
 
 
 def _referenced(in_use, path, survey, learned):
