@@ -19,16 +19,16 @@ For every building and ordered pair of its runs (survey S, working run W):
   (the documented command, its defaults) builds, checks and keeps or
   refuses a candidate from the survey plus that recording;
 - **judged** on S's cut scans (both buildings: single-scan error of the
-  model in use before, of the model in use after the update, and of the
-  full survey, that is S without only the cut piece the scan lies in:
-  one ``train_model`` per piece, so that no scan is judged by a model
-  trained on it), and where the building has a third run J, on J: single
-  and fused errors (seeds 0-2, the model in use's fitted odometry for
-  every model: a running node keeps the fit it started with) overall and
-  in the former holes (J's scans farther than 3 m from every kept survey
-  scan), before, after and with S whole; coverage: the share of the
-  judged scans within 3 m of a survey scan (the recorded scans' labels
-  count after);
+  model in use before and after the update, and of a perfect recording:
+  ``train_model`` on S with holes plus every scan of W at its true
+  position; S whole cannot judge its own scans, it was trained on them),
+  and where the building has a third run J, on J: single and fused
+  errors (seeds 0-2, the model in use's fitted odometry for every model:
+  a running node keeps the fit it started with) overall and in the
+  former holes (J's scans farther than 3 m from every kept survey scan),
+  before, after, with S whole and with the perfect recording; coverage:
+  the share of the judged scans within 3 m of a survey scan (the
+  recorded scans' labels count after);
 - **a lost localiser** injected into W: at a seeded moment (60 s after
   the start to 90 s before the end) AMCL's poses are displaced 5-30 m in
   a random direction and carried on by W's odometry
@@ -308,7 +308,8 @@ def one_pair(folder, survey, work, third, seed):
     counts, stamps, xy = record(work, survey.model, local, streams,
                                 folder / f'{tag}-learned.csv')
     both = survey.with_run(work, folder)
-    hole = ~(distance_to_survey(work.xy, survey.kept_xy) <= COVERED_M)
+    hole = ~(distance_to_survey(work.xy, survey.kept_xy) <= COVERED_M) & \
+        np.isfinite(work.xy).all(axis=1)
     learned = np.isin(work.stamps, stamps)
     out = {'survey': survey.run.name, 'working': work.name,
            'recording': dict(counts), 'working_hole_scans': {

@@ -10,8 +10,9 @@ interpolated between the poses around it, else the nearest, within
 ``max_pose_age``) and the current building and floor, when
 :class:`.core.trusted.TrustGate` finds no reason against it (the
 localiser sure of its pose and not jumping, the witness saying neither
-lost nor disagrees; ``cannot_tell`` does not stop it). A scan is held, with the witness's
-state and the place when it arrived, until a pose at or after its stamp
+lost nor disagrees; ``cannot_tell`` does not stop it, except after a
+jump: then nothing until the witness agrees). A scan is held, with the
+witness's state and the place when it arrived, until a pose at or after its stamp
 arrives or a stamp more than ``max_pose_age`` past it; those held at
 shutdown are judged and labelled with the poses there are. The file is
 written as
@@ -136,7 +137,8 @@ class TrustedRecorder(Node):
             self.get_logger().info(
                 f'the localiser jumped {step:.2f} m in '
                 f'{new.stamp - old.stamp:.2f} s ({old.frame} -> {new.frame}): '
-                f'nothing recorded for {self.gate.params.settle_s:g} s')
+                f'nothing recorded for {self.gate.params.settle_s:g} s, '
+                f'then only once WiFi agrees')
         self._release()
 
     def _on_status(self, msg):
