@@ -6,8 +6,9 @@ scans the robot recorded (trusted_recorder's CSVs) train a candidate with
 the package's trainer; with ``--positions-only``, or where torch cannot be
 imported, the candidate is the model in use with those scans as its
 position references (:mod:`..core.references`, numpy only). The newest
-share of the recorded scans is held out of the candidate and scores it
-beside the model in use (:mod:`..core.update_check`). A candidate not
+share of the recorded scans that the model in use did not learn is held
+out of the candidate and scores it beside the model in use
+(:mod:`..core.update_check`). A candidate not
 worse is built again by the same recipe from every recorded scan (the
 held-out ones too), kept in the models folder and put in use
 (:mod:`..core.model_store`), else refused with its reason (exit 1); either
@@ -46,6 +47,8 @@ from .common import (add_data_arguments, add_training_arguments,
                      training_config)
 
 REFUSED = 1
+#: The provenance key of the newest recorded scan a model learned (s).
+LEARNED_UNTIL = 'recorded_until'
 NODES = ('classifier_node', 'localization_monitor')
 
 
@@ -218,7 +221,8 @@ def _update(args, store):
     recorded = read_data(args.recorded, data, 'recorded scans',
                          small_classes='keep')
     stamps = recorded.meta.get(TIME)
-    held = newest(stamps, len(recorded), args.holdout)
+    held = newest(stamps, len(recorded), args.holdout) & \
+        _unlearned(in_use, stamps, len(recorded))
     learned = recorded.subset(~held)
     new = _new_ground(args, learned, survey)
     if new is not None and new < args.min_new_scans:
@@ -228,9 +232,11 @@ def _update(args, store):
               f'built')
         return 0
     if held.sum() < MIN_HELD_OUT:
-        raise ValueError(f'--recorded: {len(recorded)} scans, {held.sum()} '
-                         f'held out: at least {MIN_HELD_OUT} are needed to '
-                         f'judge a candidate; record more')
+        print(f'not updated: {held.sum()} of the {len(recorded)} recorded '
+              f'scans to judge a candidate on (the newest, not learned by '
+              f'the model in use), fewer than {MIN_HELD_OUT}; nothing '
+              f'built: record more')
+        return 0
     changes = ap_changes(in_use.ap_ids, recorded.ap_ids, recorded.rssi,
                          stamps, args.ap_window * 3600.0)
     if train is None:
@@ -268,7 +274,8 @@ def _update(args, store):
             'update': kind,
             'held_out': f'the newest {args.holdout:g} of the recorded scans '
                         f'by {"TIMESTAMP" if stamps is not None else "row"}'
-                        f', not trained on',
+                        f', less those the model in use learned (up to its '
+                        f'{LEARNED_UNTIL}), not trained on',
             'held_out_scans': int(held.sum()),
             'scores': 'core/evaluation.py on the held-out scans, each model '
                       'mapping their APs as the node does: building and '
@@ -312,6 +319,9 @@ def _update(args, store):
                                     'reason': 'the model in use before the '
                                               'first update',
                                     'source': str(in_use_path)})
+    if stamps is not None:     # what the next update must not judge on
+        final.provenance[LEARNED_UNTIL] = float(np.max(
+            stamps if final is not candidate else stamps[~held]))
     with tempfile.TemporaryDirectory(dir=args.folder,
                                      prefix='.candidate.') as tmp:
         save_model(final, Path(tmp) / 'candidate.npz')
@@ -346,6 +356,19 @@ def _new_ground(args, learned, survey):
     return None
 
 
+def _unlearned(in_use, stamps, n):
+    """
+    Return which recorded scans the model in use did not learn (a mask).
+
+    Those newer than its :data:`LEARNED_UNTIL` (an update put it in use);
+    all without it, or without the scans' times.
+    """
+    until = in_use.provenance.get(LEARNED_UNTIL)
+    if until is None or stamps is None:
+        return np.ones(n, bool)
+    return np.asarray(stamps, np.float64) > float(until)
+
+
 def _rebuilt(build, recorded, in_use, candidate, built):
     """
     Return (the model to put in use, how it was built).
@@ -357,8 +380,8 @@ def _rebuilt(build, recorded, in_use, candidate, built):
     try:
         final, _, final_built = build(recorded)
         problem = swap_problem(in_use, final)
-    except (ValueError, RuntimeError) as exc:
-        problem = str(exc)
+    except (ValueError, RuntimeError, MemoryError) as exc:
+        problem = str(exc) or type(exc).__name__
     if problem is None:
         return final, final_built
     print(f'note: the rebuild with the held-out scans failed ({problem}); '
@@ -373,14 +396,15 @@ def _trained(args, train, config, survey, learned, leave_out, in_use):
     Return (candidate, its kind, its training) trained anew.
 
     The model in use's odometry fit (``fusion``: the robot's, not the
-    survey's) is carried over, and its tracking section when the
-    candidate has the same building/floor classes.
+    survey's) is carried over, and its tracking section, if it has one,
+    when the candidate has the same building/floor classes.
     """
     fp = together(survey, learned, leave_out)
     print(fp.summary(), file=sys.stderr, flush=True)
     candidate, _, training = train(fp, config, _log(args))
     candidate.fusion = in_use.fusion
-    same = np.array_equal(candidate.classes, in_use.classes)
+    same = np.array_equal(candidate.classes, in_use.classes) and \
+        in_use.tracking is not None
     if same:
         candidate.tracking = in_use.tracking
     return candidate, 'full: network and position references trained ' \
@@ -390,7 +414,8 @@ def _trained(args, train, config, survey, learned, leave_out, in_use):
             'recorded_scans': len(fp) - len(survey),
             'aps': len(candidate.ap_ids), 'epochs': training.epochs,
             'seconds': round(training.seconds, 1),
-            'carried_over': ['fusion'] + (['tracking'] if same else [])}}
+            'carried_over': (['fusion'] if in_use.fusion is not None
+                             else []) + (['tracking'] if same else [])}}
 
 
 def _referenced(in_use, path, survey, learned):
