@@ -156,7 +156,8 @@ def models(train, folder, holes=False):
     """
     Train on ``train`` and fit its odometry.
 
-    Return (plain path, fitted path, true positions of the kept scans).
+    Return (plain path, fitted path, true positions of the kept scans,
+    the scans CSV trained on).
     """
     scans, kept = survey(train, folder, holes)
     tag = f'{train.name}{"-holes" if holes else ""}'
@@ -165,7 +166,7 @@ def models(train, folder, holes=False):
     cli('train_model', '--data', scans, '-o', plain, '--quiet')
     cli('fit_odometry', '--model', plain, '--data', scans, '--odometry',
         train.folder / 'odom.csv', '-o', fitted)
-    return plain, fitted, kept[np.isfinite(kept).all(axis=1)]
+    return plain, fitted, kept[np.isfinite(kept).all(axis=1)], scans
 
 
 def single_scans(model, run):

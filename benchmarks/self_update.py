@@ -74,9 +74,10 @@ from wifi_place_recognition.core.witness_offline import replay
 from wifi_place_recognition.data.recording import FingerprintLog
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from fusion import (cli, SEEDS, SETTLE_S, site_runs,  # noqa: E402
-                    survey_holes)
-from witness import amcl, carried, END_S, START_S  # noqa: E402
+from fusion import (cli, models, SEEDS, SETTLE_S,  # noqa: E402
+                    site_runs, survey_holes)
+from witness import (amcl, carried, END_S, START_S,  # noqa: E402
+                     survey as survey_xy)
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / 'benchmarks' / 'results'
@@ -89,14 +90,6 @@ GOALS = ('single-scan error on the cut scans after <= 1.2 x a perfect '
          'recording\'s (the survey with holes plus every scan of the '
          'working run); fused error on the third run after <= 1.1 x the '
          'survey whole\'s; 0 scans learned while the localiser was lost')
-
-
-def write_rows(run, keep, path):
-    """Write the rows ``keep`` of ``run``'s scans.csv to ``path``."""
-    lines = (run.folder / 'scans.csv').read_text().splitlines(True)
-    Path(path).write_text(lines[0] + ''.join(
-        line for line, k in zip(lines[1:], keep) if k))
-    return path
 
 
 def errors(model, fp, xy):
@@ -119,13 +112,8 @@ class Survey:
     def __init__(self, run, folder):
         self.run = run
         self.cut = survey_holes(run.xy)
-        self.kept_xy = run.xy[~self.cut]
-        self.csv = write_rows(run, ~self.cut, folder / f'{run.name}-holes.csv')
-        plain = folder / f'{run.name}-holes.npz'
-        self.model_path = folder / f'{run.name}-holes-fitted.npz'
-        cli('train_model', '--data', self.csv, '-o', plain, '--quiet')
-        cli('fit_odometry', '--model', plain, '--data', self.csv,
-            '--odometry', run.folder / 'odom.csv', '-o', self.model_path)
+        _, self.model_path, self.kept_xy, self.csv = models(run, folder,
+                                                            holes=True)
         self.model = load_model(self.model_path)
         whole = folder / f'{run.name}-full.npz'
         cli('train_model', '--data', run.folder / 'scans.csv', '-o', whole,
@@ -150,11 +138,6 @@ def working_streams(model, run):
                                    Fusion(model.fusion, seed=0))
     places = [model.classes[c] for c in proba.argmax(axis=1)]
     return scans, (run.stamps, fxy, fyaw, fcov), places
-
-
-def survey_xy(model):
-    """Return the model's surveyed positions (its k-NN references)."""
-    return model.position.origin + model.position.reference_xy(0)
 
 
 def record(run, model, localiser, streams, path):

@@ -47,7 +47,7 @@ def test_a_folder_of_bags_gives_the_csvs_figures(fusion, tmp_path):
     for (train, test), folder in (((csvs[0], csvs[1]), tmp_path / 'c'),
                                   ((bags[0], bags[1]), tmp_path / 'b')):
         folder.mkdir()
-        plain, fitted, kept = fusion.models(train, folder, holes=True)
+        plain, fitted, kept, _ = fusion.models(train, folder, holes=True)
         model = fusion.load_model(fitted)
         single = fusion.single_scans(fusion.load_model(plain), test)
         hole = fusion.in_holes(test, kept)

@@ -161,8 +161,7 @@ def position_judges(held, learned):
     survey and the recorded scans it was trained on): elsewhere neither
     model has been and their errors there differ by chance (a stretch the
     robot drove only at the end of its recording). All of them when fewer
-    than
-    :data:`MIN_HELD_OUT` are, or without positions.
+    than :data:`MIN_HELD_OUT` are, or without positions.
     """
     n = len(held.building)
     if held.position is None or any(p.position is None for p in learned):
