@@ -92,7 +92,8 @@ class Monitor:
         assert wait_until(lambda: self.local.get_subscription_count() and
                           self.fused.get_subscription_count() and
                           all(s.get_publisher_count() for s in self.subs) and
-                          self.verdicts, 60, ros), self.proc.stop()[1]
+                          self.verdicts and self.states, 60, ros), \
+            self.proc.stop()[1]
 
     def _on_diag(self, msg):
         mine = [s for s in msg.status
