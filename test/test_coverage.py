@@ -1,12 +1,14 @@
 """The coverage model: learned from the survey, kept, read by the filter."""
 
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 from wifi_place_recognition.core.artifact import (load_model, ModelFileError,
                                                   save_model)
-from wifi_place_recognition.core.coverage import CoverageModel, FEATURES
+from wifi_place_recognition.core.coverage import (CoverageModel,
+                                                  distance_by_place, FEATURES)
 from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.filter.particles import (FusionParams,
                                                           ParticleFilter)
@@ -46,6 +48,19 @@ def test_the_probability_falls_as_the_answer_looks_unlike_the_survey():
 def test_a_bad_coverage_section_is_refused_naming_it(change, named):
     with pytest.raises(ValueError, match=named):
         _model(**change)
+
+
+def test_the_distance_to_the_survey_counts_only_the_same_place():
+    survey = [[0.0, 0.0], [10.0, 0.0], [0.0, 5.0]]
+    xy = [[0.0, 1.0], [0.0, 1.0], [np.nan, 0.0], [3.0, 4.0]]
+    # class labels: the first scan's class has only the far survey scan
+    got = distance_by_place(xy, [1, 0, 0, 2], survey, [0, 1, 0])
+    assert np.allclose(got[:2], [math.hypot(10, 1), 1.0])
+    assert np.isnan(got[2]) and got[3] == np.inf    # no survey of class 2
+    # building and floor rows: the same floor of another building differs
+    got = distance_by_place(xy[:2], [[0, 1], [1, 1]], survey,
+                            [[1, 1], [0, 1], [1, 1]])
+    assert np.allclose(got, [math.hypot(10, 1), 1.0])
 
 
 def test_fit_learns_from_held_out_scans_and_reports_its_reliability():

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..core.artifact import load_model
 from ..core.evaluation import align
-from ..core.coverage import COVERED_M, distance_to_survey
+from ..core.coverage import COVERED_M, distance_by_place
 from ..core.gaps import gaps
 from ..core.resources import default_model_path
 from .common import (add_data_arguments, check_outputs, data_options,
@@ -129,11 +129,11 @@ def off_survey(model, fp, covered_m):
     label = np.array([index.get((int(b), int(f)), -1) for b, f in
                       zip(fp.building, fp.floor)])
     c = np.where(label >= 0, label, proba.argmax(axis=1))
-    distance = np.full(len(fp), np.inf)
-    for k in np.unique(c):
-        mine = c == k
-        distance[mine] = distance_to_survey(
-            fp.position[mine], locator.reference_xy(k) + locator.origin)
+    searched = np.unique(c)
+    survey = [locator.reference_xy(k) + locator.origin for k in searched]
+    distance = distance_by_place(
+        fp.position, c, np.concatenate(survey),
+        np.repeat(searched, [len(xy) for xy in survey]))
     return {'off': ~(distance <= covered_m) & np.isfinite(
         fp.position).all(axis=1),
         'basis': f'no survey scan within {covered_m:g} m'}

@@ -47,6 +47,27 @@ def distance_to_survey(xy, survey_xy):
     return out
 
 
+def distance_by_place(xy, place, survey_xy, survey_place):
+    """
+    Return each position's distance (m) to the nearest survey position of
+    its place.
+
+    ``place``, ``survey_place``: one label per row (a class index, or
+    rows such as building and floor); inf where the survey has no
+    position of the place, NaN for a position with NaN.
+    """
+    xy = np.asarray(xy, np.float64)
+    survey_xy = np.asarray(survey_xy, np.float64)
+    labels = np.concatenate([np.asarray(place), np.asarray(survey_place)])
+    code = np.unique(labels, axis=0, return_inverse=True)[1].reshape(-1)
+    mine, theirs = code[:len(xy)], code[len(xy):]
+    out = np.full(len(xy), np.inf)
+    for label in np.unique(mine):
+        rows = mine == label
+        out[rows] = distance_to_survey(xy[rows], survey_xy[theirs == label])
+    return out
+
+
 #: What :func:`features` returns, in order.
 FEATURES = ('log_sigma', 'log_neighbour_ratio', 'log_spread',
             'unheard_share')

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .coverage import COVERED_M, distance_to_survey
+from .coverage import COVERED_M, distance_by_place
 from .evaluation import evaluate
 from .scan import normalize_ap_id
 
@@ -142,14 +142,11 @@ def off_survey(recorded, survey):
         if scans.position is None:
             raise ValueError(f'the {name} scans have no positions (X, Y): '
                              f'new ground cannot be told')
-    off = np.zeros(len(recorded.building), bool)
-    places = set(zip(recorded.building.tolist(), recorded.floor.tolist()))
-    for b, f in places:
-        mine = (recorded.building == b) & (recorded.floor == f)
-        theirs = (survey.building == b) & (survey.floor == f)
-        off[mine] = distance_to_survey(recorded.position[mine],
-                                       survey.position[theirs]) > COVERED_M
-    return off
+    return distance_by_place(
+        recorded.position, np.column_stack([recorded.building,
+                                            recorded.floor]),
+        survey.position, np.column_stack([survey.building,
+                                          survey.floor])) > COVERED_M
 
 
 def position_judges(held, learned):

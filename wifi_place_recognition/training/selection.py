@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from ..core.coverage import (COVERED_M, distance_to_survey,
+from ..core.coverage import (COVERED_M, distance_by_place,
                              features as coverage_features, unheard_share)
 from ..core.evaluation import align
 from ..core.locator import calibrated_sigma, Locator, METRICS
@@ -281,13 +281,9 @@ MIN_COVERED = 30
 
 def _covered(split):
     """Return which held-out scans lie within COVERED_M of a kept one."""
-    covered = np.zeros(len(split.held_y), bool)
-    kept = split.fp.position[split.keep]
-    for c in np.unique(split.held_y):
-        mine = split.held_y == c
-        covered[mine] = distance_to_survey(split.held_position[mine],
-                                           kept[split.y == c]) <= COVERED_M
-    return covered
+    return distance_by_place(split.held_position, split.held_y,
+                             split.fp.position[split.keep],
+                             split.y) <= COVERED_M
 
 
 def _groups(fp, y, n_classes, scope):
