@@ -13,7 +13,8 @@ seeds ``--seeds`` (default 0), the fitted odometry.
   ``RADIUS_M`` (1 with fewer than two). Inside a corridor the survey lies
   on both sides of the answer (near 0); a scan taken in a hole is
   answered at the edge of the surveyed stretch (near 1). A geometric
-  feature of the answer, so another day's RSSI offsets do not move it.
+  feature of the answer: it does not rest on signal-space distances.
+  Survey positions on the answer itself do not count.
   Its ROC AUC against the scans in holes, beside the model's coverage
   probability's.
 - **The single-scan 95 % circle widened by it**: sigma x (1 + b side^2),
@@ -22,11 +23,13 @@ seeds ``--seeds`` (default 0), the fitted odometry.
   largest error after 60 s, the 95 % ellipse): the default; scans
   weighed by one-sidedness (coverage 1 - side, ``coverage_full`` 0.5);
   two sensor models that ask where the *particle* is: ``EdgeSensor`` (a
-  particle more than 3 m from the survey expects the scan at the
-  survey's nearest edge, where a k-NN answer lands from a hole) and
-  ``BeliefSensor`` (a scan trusted as far as the particles lie within 3 m
-  of the survey, once their heading is known); and told which scans lie
-  in holes (the upper bound).
+  particle more than 3 m from the survey expects the scan 3 m from the
+  nearest survey position, on its way there: near where a k-NN answer
+  from a hole lands, and continuous at 3 m) and ``BeliefSensor`` (a scan
+  trusted as far as the particles lie within 3 m of the survey, once
+  their heading is known: the particles' unweighted share, and the
+  restart rule reads the previous scan's trust, as the sensor interface
+  is called); and told which scans lie in holes (the upper bound).
 
 Table on stdout, JSON in ``benchmarks/results/coverage-ideas.json``.
 
@@ -94,7 +97,7 @@ def nearest_covered(xy, survey_xy, reach=COVERED_M):
 
 
 class EdgeSensor(WifiSensorModel):
-    """The scan expected at the survey's edge nearest a particle."""
+    """The scan expected 3 m from the survey position nearest a particle."""
 
     def __init__(self, params, survey_xy):
         super().__init__(params)
@@ -113,7 +116,12 @@ class EdgeSensor(WifiSensorModel):
 
 
 class BeliefSensor(WifiSensorModel):
-    """A scan trusted as far as the particles lie on the survey."""
+    """
+    A scan trusted as far as the particles lie on the survey.
+
+    Their unweighted share (the sensor sees no weights); the restart rule
+    (:meth:`disagrees`, called first) reads the previous scan's trust.
+    """
 
     def __init__(self, params, survey_xy):
         super().__init__(params)

@@ -101,7 +101,8 @@ def test_a_standing_robot_has_no_yaw_anywhere(ros, tmp_path, surveyed_model):
         # resent until taken (odometry is read best-effort; a resent pose
         # of the same stamp is skipped as no fault)
         assert wait_until(lambda: drive.send_odometry([t - 1, *still]) or
-                          health(client)['fusion'] == 'on', 20, ros)
+                          health(client)['fusion'] == 'on', 20, ros), \
+            proc.stop()[1]
         for k in range(6):
             drive.send_odometry([t + k, *still])
             drive.send_odometry([t + k + 0.1, *still])

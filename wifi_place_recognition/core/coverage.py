@@ -54,7 +54,7 @@ def distance_by_place(xy, place, survey_xy, survey_place):
     To the nearest survey position with the same label. ``place``,
     ``survey_place``: one label per row (a class index, or rows such as
     building and floor); inf where the survey has no position of the
-    place, NaN for a position with NaN.
+    place, else NaN for a position with NaN.
     """
     xy = np.asarray(xy, np.float64)
     survey_xy = np.asarray(survey_xy, np.float64)
