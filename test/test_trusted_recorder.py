@@ -22,6 +22,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from ros_helpers import NodeProcess, RELIABLE
 from sensor_msgs.msg import JointState
+from rclpy.qos import ReliabilityPolicy
 from std_msgs.msg import String
 from test_localization_monitor import LATCHED, pose
 from wifi_place_recognition.ros.messages import key_value, status_values
@@ -44,9 +45,14 @@ class Recorder:
     def __init__(self, ros, tmp_path):
         self.ros = ros
         self.output = tmp_path / 'learned.csv'
+        # the localiser's poses and the scans read reliably (best effort,
+        # the default, may drop one under load): the CSV is checked exactly
+        reliable = [a for topic in ('/amcl_pose', '/wifi/scan') for a in
+                    ('-p', f'qos_overrides.{topic}.subscription.reliability'
+                     f':=reliable')]
         self.proc = NodeProcess(tmp_path, python_module(
             'ros.trusted_recorder', '--ros-args', '-p',
-            f'output:={self.output}'), NAME)
+            f'output:={self.output}', *reliable), NAME)
         self.local = ros.create_publisher(PoseWithCovarianceStamped,
                                           'amcl_pose', RELIABLE)
         self.status = ros.create_publisher(
@@ -61,6 +67,16 @@ class Recorder:
             p.get_subscription_count() for p in (
                 self.local, self.status, self.place, self.scans)), 60,
             ros), self.proc.stop()[1]
+        for topic in ('/amcl_pose', '/wifi/scan'):
+            assert wait_until(lambda: self.reliability(topic), 10, ros)
+            assert self.reliability(topic) == [ReliabilityPolicy.RELIABLE], \
+                topic
+
+    def reliability(self, topic):
+        """Return the reliability of the recorder's subscriptions."""
+        return [i.qos_profile.reliability for i in
+                self.ros.get_subscriptions_info_by_topic(topic)
+                if i.node_name == NAME]
 
     def _on_diag(self, msg):
         self.progress += [status_values(s) for s in msg.status

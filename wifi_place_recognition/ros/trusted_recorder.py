@@ -35,6 +35,7 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -44,7 +45,7 @@ from .kept_files import KeptFiles
 from .messages import (key_value as _kv, pose_problem, seconds, stamp_time,
                        status_values, yaw_of)
 from .node_interface import declare
-from .record_fingerprints import POSE_QOS, SCAN_QOS
+from .record_fingerprints import POSE_QOS, QOS_OVERRIDES, SCAN_QOS
 from .runner import names_the_node, run
 from .sequence import PublisherGaps
 from .trusted_parameters import PARAMETERS, TRUST_FIELDS
@@ -82,9 +83,10 @@ class TrustedRecorder(Node):
         # the localiser, witness and place before the scans: the executor
         # takes what waits in that order
         self.subs = [
-            self.create_subscription(PoseWithCovarianceStamped,
-                                     values['localizer_topic'],
-                                     self._on_pose, POSE_QOS),
+            self.create_subscription(
+                PoseWithCovarianceStamped, values['localizer_topic'],
+                self._on_pose, POSE_QOS, qos_overriding_options=(
+                    QoSOverridingOptions(policy_kinds=QOS_OVERRIDES))),
             self.create_subscription(String, values['status_topic'],
                                      self._on_status, LATCHED),
             self.create_subscription(DiagnosticArray, values['place_topic'],
@@ -92,7 +94,9 @@ class TrustedRecorder(Node):
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
         self._scan_sub = self.create_subscription(
-            JointState, 'wifi/scan', self._on_scan, SCAN_QOS)
+            JointState, 'wifi/scan', self._on_scan, SCAN_QOS,
+            qos_overriding_options=(
+                QoSOverridingOptions.with_default_policies()))
         self.create_timer(1.0, self._publish_progress)
         localizer, status, place = (s.topic_name for s in self.subs)
         p = self.gate.params
