@@ -17,12 +17,17 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 import numpy as np
 from ros_helpers import RELIABLE, running_node
+from rclpy.qos import ReliabilityPolicy
 from std_srvs.srv import Trigger
 from test_place_changes import Building, ORIGIN
 from wifi_place_recognition.ros.messages import status_values, yaw_of
 from wifi_place_recognition.ros.run_replayer import odometry_message
 
 FRAME = 'map_f{floor}'
+#: The node's odometry read reliably (best effort, the default, may drop a
+#: message under load): the tests count and wait for single messages.
+RELIABLE_ODOM = ('-p', 'qos_overrides./odom.subscription.reliability:='
+                 'reliable')
 T0 = 1000.0          # s: the drive's first stamp
 SPEED = 1.0          # m/s
 DRIFT = math.radians(1.0)   # rad per m: the odometry's heading error
@@ -83,9 +88,20 @@ class Drive:
         assert wait_until(lambda: self.odom.get_subscription_count() and
                           all(s.get_publisher_count() for s in self.subs),
                           30, ros)
+        # started with RELIABLE_ODOM
+        assert wait_until(lambda: self.odometry_reliability(node_name), 10,
+                          ros)
+        assert self.odometry_reliability(node_name) == \
+            [ReliabilityPolicy.RELIABLE], 'start the node with RELIABLE_ODOM'
         self.reset = ros.create_client(Trigger, f'/{node_name}/reset')
         self.request = ros.create_client(
             Trigger, f'/{node_name}/publish_initial_pose')
+
+    def odometry_reliability(self, node_name):
+        """Return the reliability of the node's odometry subscriptions."""
+        return [i.qos_profile.reliability for i in
+                self.ros.get_subscriptions_info_by_topic('/odom')
+                if i.node_name == node_name]
 
     def _on_pose(self, msg):
         self.poses[self.key(msg.header.stamp)] = msg
@@ -154,7 +170,8 @@ def health(client):
 def test_a_drive_with_odometry_gives_a_fused_pose_with_yaw(
         ros, tmp_path, surveyed_model):
     with running_node(ros, tmp_path, surveyed_model, 'fused_node', '-p',
-                      f'frame_id:={FRAME}') as (client, proc, _):
+                      f'frame_id:={FRAME}', *RELIABLE_ODOM) as (
+            client, proc, _):
         drive = Drive(ros, client, 'fused_node')
         truth = square(laps=2)
         results = drive.drive(truth, odometry_of(truth))
@@ -213,7 +230,8 @@ def test_a_drive_with_odometry_gives_a_fused_pose_with_yaw(
 def test_a_lift_and_a_kidnap(ros, tmp_path, surveyed_model):
     with running_node(ros, tmp_path, surveyed_model, 'lift_node', '-p',
                       f'frame_id:={FRAME}', '-p',
-                      'initial_pose_on_change:=true') as (client, proc, _):
+                      'initial_pose_on_change:=true', *RELIABLE_ODOM) as (
+            client, proc, _):
         drive = Drive(ros, client, 'lift_node')
         truth = square(laps=1)
         drive.drive(truth, odometry_of(truth))
@@ -267,7 +285,8 @@ def test_a_lift_and_a_kidnap(ros, tmp_path, surveyed_model):
 def test_odometry_faults_are_counted_and_never_followed(
         ros, tmp_path, surveyed_model):
     with running_node(ros, tmp_path, surveyed_model, 'fault_node', '-p',
-                      'odom_timeout:=0.5') as (client, proc, _):
+                      'odom_timeout:=0.5', *RELIABLE_ODOM) as (
+            client, proc, _):
         drive = Drive(ros, client, 'fault_node')
         truth = square(laps=1)
         odometry = odometry_of(truth)
@@ -305,7 +324,7 @@ def test_odometry_faults_are_counted_and_never_followed(
 def test_fusion_switched_on_while_running_gives_poses_between_scans(
         ros, tmp_path, surveyed_model):
     with running_node(ros, tmp_path, surveyed_model, 'switch_node', '-p',
-                      'fusion:=false') as (client, proc, _):
+                      'fusion:=false', *RELIABLE_ODOM) as (client, proc, _):
         drive = Drive(ros, client, 'switch_node')
         truth = square(laps=0.25)
         odometry = odometry_of(truth)

@@ -20,7 +20,7 @@ import pytest
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from ros_helpers import Client, running_node
-from test_fusion_node import Drive, odometry_of, square
+from test_fusion_node import Drive, odometry_of, RELIABLE_ODOM, square
 from test_localization_monitor import Monitor, truth
 from test_place_changes import ORIGIN
 from wifi_place_recognition.core.artifact import load_model
@@ -71,7 +71,7 @@ def _health(client):
 def test_a_swap_under_load_answers_every_scan_once_and_the_fused_pose_goes_on(
         ros, tmp_path, surveyed_model, model_b):
     with running_node(ros, tmp_path, surveyed_model, 'swap_node',
-                      *DEEP_QUEUE) as (client, proc, _):
+                      *DEEP_QUEUE, *RELIABLE_ODOM) as (client, proc, _):
         drive = Drive(ros, client, 'swap_node')
         route = square(laps=2)
         odometry = odometry_of(route)

@@ -14,7 +14,7 @@ from conftest import dataset_file, wait_until
 import numpy as np
 import pytest
 from ros_helpers import running_node
-from test_fusion_node import Drive, health
+from test_fusion_node import Drive, health, RELIABLE_ODOM
 from test_place_changes import Building, listen
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.recognizer import PlaceRecognizer
@@ -94,7 +94,8 @@ def test_a_single_wrong_scan_does_not_switch_maps(
 
 
 def test_a_standing_robot_has_no_yaw_anywhere(ros, tmp_path, surveyed_model):
-    with running_node(ros, tmp_path, surveyed_model, 'standing_node') as (
+    with running_node(ros, tmp_path, surveyed_model, 'standing_node',
+                      *RELIABLE_ODOM) as (
             client, proc, _):
         drive = Drive(ros, client, 'standing_node')
         t, still = 1000.0, [0.0, 0.0, 0.7]     # odometry: x, y, yaw

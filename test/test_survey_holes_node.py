@@ -13,7 +13,8 @@ import math
 from conftest import wait_until
 import numpy as np
 from ros_helpers import running_node
-from test_fusion_node import Drive, health, odometry_of, square
+from test_fusion_node import (Drive, health, odometry_of, RELIABLE_ODOM,
+                              square)
 from test_place_changes import ORIGIN
 
 
@@ -52,7 +53,7 @@ def drive_with_holes(drive, truth, odometry, every=10):
 def test_the_pose_follows_odometry_where_the_survey_has_no_scan(
         ros, tmp_path, surveyed_model):
     with running_node(ros, tmp_path, surveyed_model,
-                      'holes_node') as (client, proc, _):
+                      'holes_node', *RELIABLE_ODOM) as (client, proc, _):
         drive = Drive(ros, client, 'holes_node')
         truth = square(laps=1.8)
         # odometry without drift: the pose can follow it closely

@@ -2,9 +2,10 @@
 classifier_node's odometry input: the pipeline's fusion on ROS.
 
 Subscribes ``odom`` (``nav_msgs/Odometry``, the pose in the robot's odom
-frame; sensor-data QoS with a deep queue) and hands each pose to the
-node's :class:`.scan_pipeline.ScanPipeline` (a zero stamp means the time
-the node takes the message), on the monotonic clock; a timer ticks the
+frame; sensor-data QoS with a deep queue, which ``qos_overrides``
+parameters change) and hands each pose to the node's
+:class:`.scan_pipeline.ScanPipeline` (a zero stamp means the time the
+node takes the message), on the monotonic clock; a timer ticks the
 pipeline ``pose_rate`` times a second (the fused pose between scans; a
 scan that waited ``odom_timeout`` seconds for odometry goes through
 alone), and stops while fusion is off. What the pipeline gives goes to
@@ -17,8 +18,10 @@ import time
 
 from nav_msgs.msg import Odometry
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
 
 from .messages import pose_problem, stamp_time, yaw_of
+from .node_interface import QOS_OVERRIDES
 
 ODOM_QOS = copy.copy(qos_profile_sensor_data)
 ODOM_QOS.depth = 100
@@ -33,7 +36,9 @@ class OdometryFusion:
         self._publish = publish
         self._timer = None
         self._subscription = node.create_subscription(
-            Odometry, 'odom', self._on_odometry, ODOM_QOS)
+            Odometry, 'odom', self._on_odometry, ODOM_QOS,
+            qos_overriding_options=QoSOverridingOptions(
+                policy_kinds=QOS_OVERRIDES))
         self.apply({'pose_rate': pipeline.fusion.pose_rate})
 
     @property

@@ -55,14 +55,14 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data,
-                       QoSPolicyKind, QoSProfile, ReliabilityPolicy)
+                       QoSProfile, ReliabilityPolicy)
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
 from ..core.pose_label import blend, HeldScans, Pose
 from .kept_files import KeptFiles
 from .messages import pose_problem, seconds, stamp_time, yaw_of
-from .node_interface import declare
+from .node_interface import declare, QOS_OVERRIDES
 from .recorder_parameters import PARAMETERS
 from .runner import names_the_node, run
 from ..data.recording import (FingerprintLog, frame_problem,
@@ -77,8 +77,6 @@ POSE_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT,
                       durability=DurabilityPolicy.VOLATILE)
 ODOM_QOS = copy.copy(POSE_QOS)
 ODOM_QOS.depth = 1000
-QOS_OVERRIDES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
-                 QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
 
 
 class RecordFingerprintsNode(Node):
