@@ -12,13 +12,8 @@ ROS.
 import textwrap
 
 from rcl_interfaces.msg import FloatingPointRange
-from rclpy.qos import QoSPolicyKind
 
 OPTIONS = ('-h', '--help')
-#: The QoS policies a node's pose and odometry inputs let parameters
-#: override (``qos_overrides.<topic>.subscription.<policy>``).
-QOS_OVERRIDES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
-                 QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
 TYPES = {bool: 'bool', int: 'integer', float: 'double', str: 'string'}
 WIDTH = 79
 

@@ -21,7 +21,7 @@ from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
 from .messages import pose_problem, stamp_time, yaw_of
-from .node_interface import QOS_OVERRIDES
+from .qos import QOS_OVERRIDES
 
 ODOM_QOS = copy.copy(qos_profile_sensor_data)
 ODOM_QOS.depth = 100

@@ -62,7 +62,8 @@ from sensor_msgs.msg import JointState
 from ..core.pose_label import blend, HeldScans, Pose
 from .kept_files import KeptFiles
 from .messages import pose_problem, seconds, stamp_time, yaw_of
-from .node_interface import declare, QOS_OVERRIDES
+from .node_interface import declare
+from .qos import QOS_OVERRIDES
 from .recorder_parameters import PARAMETERS
 from .runner import names_the_node, run
 from ..data.recording import (FingerprintLog, frame_problem,

@@ -44,7 +44,8 @@ from ..data.recording import FingerprintLog, frame_problem, RecordingError
 from .kept_files import KeptFiles
 from .messages import (key_value as _kv, pose_problem, seconds, stamp_time,
                        status_values, yaw_of)
-from .node_interface import declare, QOS_OVERRIDES
+from .node_interface import declare
+from .qos import QOS_OVERRIDES
 from .record_fingerprints import POSE_QOS, SCAN_QOS
 from .runner import names_the_node, run
 from .sequence import PublisherGaps
