@@ -95,12 +95,12 @@ def test_a_single_wrong_scan_does_not_switch_maps(
 
 def test_a_standing_robot_has_no_yaw_anywhere(ros, tmp_path, surveyed_model):
     with running_node(ros, tmp_path, surveyed_model, 'standing_node',
-                      *RELIABLE_ODOM) as (
-            client, proc, _):
+                      *RELIABLE_ODOM) as (client, proc, _):
         drive = Drive(ros, client, 'standing_node')
         t, still = 1000.0, [0.0, 0.0, 0.7]     # odometry: x, y, yaw
-        # resent until taken (odometry is read best-effort; a resent pose
-        # of the same stamp is skipped as no fault)
+        # resent until taken (sent at discovery, it was once lost while
+        # odometry was read best effort; a resent pose of the same stamp is
+        # skipped as no fault)
         assert wait_until(lambda: drive.send_odometry([t - 1, *still]) or
                           health(client)['fusion'] == 'on', 20, ros), \
             proc.stop()[1]
