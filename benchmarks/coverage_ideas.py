@@ -47,7 +47,7 @@ import tempfile
 import numpy as np
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
-from wifi_place_recognition.core.coverage import COVERED_M
+from wifi_place_recognition.core.coverage import COVERED_M, PAIRS_PER_STEP
 from wifi_place_recognition.core.filter.fusion import Fusion
 from wifi_place_recognition.core.filter.sensor import WifiSensorModel
 from wifi_place_recognition.core.filter.trajectory import fuse_offline, score
@@ -84,7 +84,7 @@ def one_sidedness(xy, survey_xy, radius=RADIUS_M):
 def nearest_covered(xy, survey_xy, reach=COVERED_M):
     """Return each position moved to within ``reach`` of the survey."""
     out = np.array(xy, np.float64)
-    step = max(1, 2_000_000 // len(survey_xy))
+    step = max(1, PAIRS_PER_STEP // len(survey_xy))
     for start in range(0, len(out), step):
         block = out[start:start + step]
         d2 = ((block[:, None] - survey_xy[None]) ** 2).sum(axis=2)
@@ -96,12 +96,16 @@ def nearest_covered(xy, survey_xy, reach=COVERED_M):
     return out
 
 
-class EdgeSensor(WifiSensorModel):
-    """The scan expected 3 m from the survey position nearest a particle."""
+class SurveySensor(WifiSensorModel):
+    """A sensor model that knows the survey's positions (to 0.25 m)."""
 
     def __init__(self, params, survey_xy):
         super().__init__(params)
         self.survey = np.unique(np.round(survey_xy * 4) / 4, axis=0)
+
+
+class EdgeSensor(SurveySensor):
+    """The scan expected 3 m from the survey position nearest a particle."""
 
     def disagrees(self, xy, cov, scan):
         expected = nearest_covered(xy[None], self.survey)[0]
@@ -115,7 +119,7 @@ class EdgeSensor(WifiSensorModel):
             p.wifi_outlier
 
 
-class BeliefSensor(WifiSensorModel):
+class BeliefSensor(SurveySensor):
     """
     A scan trusted as far as the particles lie on the survey.
 
@@ -124,8 +128,7 @@ class BeliefSensor(WifiSensorModel):
     """
 
     def __init__(self, params, survey_xy):
-        super().__init__(params)
-        self.survey = np.unique(np.round(survey_xy * 4) / 4, axis=0)
+        super().__init__(params, survey_xy)
         self.believed = 1.0
 
     def disagrees(self, xy, cov, scan):
@@ -145,10 +148,8 @@ class BeliefSensor(WifiSensorModel):
 
 def survey_positions(model):
     """Return every reference position of a model (m, map frame)."""
-    locator = model.position
-    return np.concatenate([locator.origin + np.asarray(
-        locator.reference_xy(c), np.float64)
-        for c in range(len(model.classes))])
+    return np.concatenate([model.position.map_xy(c)
+                           for c in range(len(model.classes))])
 
 
 def filters(fitted, single, side, hole, survey_xy):

@@ -164,7 +164,7 @@ def scan_stream(model, run):
 
 def survey(model):
     """Return the model's surveyed positions (its k-NN references)."""
-    return model.position.origin + model.position.reference_xy(0)
+    return model.position.map_xy(0)
 
 
 def fused_stream(model, scans, odometry, seed):

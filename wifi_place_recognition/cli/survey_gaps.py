@@ -130,7 +130,7 @@ def off_survey(model, fp, covered_m):
                       zip(fp.building, fp.floor)])
     c = np.where(label >= 0, label, proba.argmax(axis=1))
     searched = np.unique(c)
-    survey = [locator.reference_xy(k) + locator.origin for k in searched]
+    survey = [locator.map_xy(k) for k in searched]
     distance = distance_by_place(
         fp.position, c, np.concatenate(survey),
         np.repeat(searched, [len(xy) for xy in survey]))

@@ -202,6 +202,10 @@ class Locator:
         g = self.group[c]
         return self.xy[self.group_start[g]:self.group_start[g + 1]]
 
+    def map_xy(self, c):
+        """Return the positions (m, float64) of the references c searches."""
+        return self.origin + self.reference_xy(c).astype(np.float64)
+
 
 def calibrated_sigma(errors, nearest, predicted, n_classes, min_scans=30):
     """

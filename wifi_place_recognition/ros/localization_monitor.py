@@ -87,8 +87,7 @@ def survey_of(model, template):
         return None
     for c, (building, floor) in enumerate(model.classes):
         frame = template.format(building=building, floor=floor)
-        refs = locator.origin + np.asarray(locator.reference_xy(c),
-                                           np.float64)
+        refs = locator.map_xy(c)
         out[frame] = np.concatenate([out[frame], refs]) if frame in out \
             else refs
     return out
