@@ -10,15 +10,15 @@ seeds ``--seeds`` (default 0), the fitted odometry.
 
 - **One-sidedness of the answer**: the mean resultant length of the
   directions from a scan's k-NN position to the survey positions within
-  ``RADIUS_M`` (1 with fewer than two). Inside a corridor the survey lies
+  ``EDGE_RADIUS_M`` (1 with fewer than two). Inside a corridor the survey lies
   on both sides of the answer (near 0); a scan taken in a hole is
   answered at the edge of the surveyed stretch (near 1). A geometric
   feature of the answer: it does not rest on signal-space distances.
   Survey positions on the answer itself do not count.
   Its ROC AUC against the scans in holes, beside the model's coverage
   probability's.
-- **The single-scan 95 % circle widened by it**: sigma x (1 + b side^2),
-  b = ``WIDEN``.
+  (The single-scan 95 % circle is widened by it in the package since:
+  ``edge_sigma_m``, measured by ``fusion.py`` and ``panel.py``.)
 - **The filter** (mean fused / single error, the worst pair, p95, the
   largest error after 60 s, the 95 % ellipse): the default; scans
   weighed by one-sidedness (coverage 1 - side, ``coverage_full`` 0.5);
@@ -47,38 +47,19 @@ import tempfile
 import numpy as np
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
-from wifi_place_recognition.core.coverage import COVERED_M, PAIRS_PER_STEP
+from wifi_place_recognition.core.coverage import (
+    COVERED_M, EDGE_RADIUS_M, one_sidedness, PAIRS_PER_STEP)
 from wifi_place_recognition.core.filter.fusion import Fusion
 from wifi_place_recognition.core.filter.sensor import WifiSensorModel
 from wifi_place_recognition.core.filter.trajectory import fuse_offline, score
-from wifi_place_recognition.core.locator import R95
 from wifi_place_recognition.training.coverage import auc
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fusion as fb  # noqa: E402  (the fusion benchmark's protocol)
 
-#: Survey positions within this distance (m) of an answer count for its
-#: one-sidedness.
-RADIUS_M = 5.0
-#: The circle's widening factors b tried.
-WIDEN = (0.0, 1.0, 2.0, 3.0)
 #: The mean resultant length of the particles' headings from which the
 #: heading counts as known (BeliefSensor).
 HEADING_KNOWN = 0.9
-
-
-def one_sidedness(xy, survey_xy, radius=RADIUS_M):
-    """Return each answer's one-sidedness (0 to 1; NaN without an answer)."""
-    out = np.full(len(xy), np.nan)
-    for i, p in enumerate(xy):
-        if not np.isfinite(p).all():
-            continue
-        delta = survey_xy - p
-        dist = np.linalg.norm(delta, axis=1)
-        near = (dist < radius) & (dist > 1e-6)
-        out[i] = 1.0 if near.sum() < 2 else float(np.linalg.norm(
-            (delta[near] / dist[near, None]).mean(axis=0)))
-    return out
 
 
 def nearest_covered(xy, survey_xy, reach=COVERED_M):
@@ -173,18 +154,15 @@ def pair(trained, test, seeds):
     hole = fb.in_holes(test, trained[2])
     survey_xy = survey_positions(plain)
     side = one_sidedness(single[0], survey_xy)
-    error = np.linalg.norm(single[0] - test.xy, axis=1)
-    ok = np.isfinite(error)
+    ok = np.isfinite(single[0]).all(axis=1) & np.isfinite(test.xy).all(
+        axis=1)
     judged = hole[ok].any()
     modelled = judged and np.isfinite(single[2][ok]).all()
     out = {'hole_scans': int(hole[ok].sum()),
            'auc_coverage': auc(single[2][ok], ~hole[ok]) if modelled
            else None,      # None: no hole, or no coverage model
            'auc_one_sidedness': auc(-side[ok], ~hole[ok]) if judged
-           else None,
-           'circle': {str(b): float(np.mean(
-               error[ok] <= R95 * single[1][ok] * (1 + b * side[ok] ** 2)))
-               for b in WIDEN}}
+           else None}
     alone = fb.single_figures(test, single, hole)['mean_m']
     out['filters'] = {}
     for name, (params, coverage, sensor) in filters(
@@ -210,9 +188,7 @@ def line(name, figures):
         return '-' if value is None else f'{value:.2f}'
     text = (f'{name:28s} {figures["hole_scans"]:4d} '
             f'{f(figures["auc_coverage"]):>5s} '
-            f'{f(figures["auc_one_sidedness"]):>5s}  circle ' +
-            ' '.join(f'{v:.3f}' for v in figures['circle'].values()) +
-            '  ratio ')
+            f'{f(figures["auc_one_sidedness"]):>5s}  ratio ')
     return text + ' '.join(
         f'{np.mean([r["ratio"] for r in runs]):.3f}'
         for runs in figures['filters'].values())
@@ -246,9 +222,8 @@ def main():
     args = p.parse_args()
     seeds = [int(s) for s in args.seeds.split(',')]
     results = {}
-    print(f'{"test <- survey":28s} hole  AUC: P  side  circle at b = '
-          f'{", ".join(map(str, WIDEN))}  fused / single: default, '
-          f'weighed, edge, belief, told')
+    print(f'{"test <- survey":28s} hole  AUC: P  side  fused / single: '
+          f'default, weighed, edge, belief, told')
     with tempfile.TemporaryDirectory() as folder:
         for site, runs in fb.site_runs(args.data, folder):
             for holes in (False, True):
@@ -266,7 +241,7 @@ def main():
               f'ellipse {s["ellipse"][0]:.2f}-{s["ellipse"][1]:.2f}')
     with atomic_write(args.out, 'w') as f:
         json.dump({'protocol': __doc__.strip(), 'seeds': seeds,
-                   'radius_m': RADIUS_M, 'pairs': results,
+                   'radius_m': EDGE_RADIUS_M, 'pairs': results,
                    'summary': total}, f, indent=1)
     print(f'wrote {args.out}')
 

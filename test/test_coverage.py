@@ -8,7 +8,8 @@ import pytest
 from wifi_place_recognition.core.artifact import (load_model, ModelFileError,
                                                   save_model)
 from wifi_place_recognition.core.coverage import (CoverageModel,
-                                                  distance_by_place, FEATURES)
+                                                  distance_by_place, FEATURES,
+                                                  one_sidedness)
 from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.filter.particles import (FusionParams,
                                                           ParticleFilter)
@@ -61,6 +62,17 @@ def test_the_distance_to_the_survey_counts_only_the_same_place():
     got = distance_by_place(xy[:2], [[0, 1], [1, 1]], survey,
                             [[1, 1], [0, 1], [1, 1]])
     assert np.allclose(got, [math.hypot(10, 1), 1.0])
+
+
+def test_one_sidedness_is_near_one_only_at_the_survey_edge():
+    corridor = np.column_stack([np.arange(0.0, 30.0, 0.5), np.zeros(60)])
+    side = one_sidedness([[15, 0], [15.2, 0], [0, 0], [-3, 0], [29.5, 0],
+                          [15, 40], [np.nan, 0]], corridor)
+    assert side[0] == pytest.approx(0, abs=1e-9)   # survey on both sides
+    assert side[1] < 0.1
+    assert side[2] == side[3] == side[4] == pytest.approx(1)  # at an end
+    assert side[5] == 1                 # no survey within 5 m
+    assert np.isnan(side[6])
 
 
 def test_fit_learns_from_held_out_scans_and_reports_its_reliability():

@@ -1,5 +1,6 @@
 """Each scan's coverage on ~/place, over real ROS, as the core gives it."""
 
+from dataclasses import replace
 from pathlib import Path
 
 from conftest import python_module, run
@@ -27,17 +28,30 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
                                model_path, '--quiet'))
     assert result.returncode == 0, result.stderr
     fp = read_fingerprints(RUN)
+    rows = [50, 375, 600, 320, 430]   # covered, in the hole, covered, and
+    #                                   two answered at the hole's edges
     with running_node(ros, tmp_path, model_path, 'coverage_node') as (
             client, proc, model):
-        expected = model.predict_positions(align(model, fp),
-                                           coverage=True)[3]
-        got = []
-        for row in (50, 375, 600):     # covered, inside the hole, covered
+        _, _, sigma, expected = model.predict_positions(align(model, fp),
+                                                        coverage=True)
+        plain = replace(model.position, edge_sigma=0.0)
+        narrow = replace(model, position=plain).predict_positions(
+            align(model, fp))[2]
+        got, sigmas = [], []
+        for row in rows:
             detected = np.flatnonzero(np.isfinite(fp.rssi[row]))
             status = client.resend_until_answered(client.scan(
                 [fp.ap_ids[j] for j in detected], fp.rssi[row, detected]),
                 30)
             assert status is not None
-            got.append(float(status_values(status)['coverage']))
-        np.testing.assert_allclose(got, expected[[50, 375, 600]], atol=2e-3)
+            values = status_values(status)
+            got.append(float(values['coverage']))
+            sigmas.append(float(values['scan_sigma_m']))
+        np.testing.assert_allclose(got, expected[rows], atol=2e-3)
         assert all(0.0 <= p <= 1.0 for p in got)
+        # each scan's own sigma, widened where the answer lies at the
+        # survey's edge (the survey calibrated by how much)
+        assert model.position.edge_sigma > 0
+        np.testing.assert_allclose(sigmas, sigma[rows], rtol=1e-3,
+                                   atol=2e-3)
+        assert (np.array(sigmas[3:]) > narrow[rows[3:]] + 1.0).all()

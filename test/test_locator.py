@@ -1,12 +1,15 @@
 """The position k-NN: exact neighbours, and its arrays in the model file."""
 
 from dataclasses import replace
+import json
 
 import numpy as np
 import pytest
-from wifi_place_recognition.core.artifact import (load_model,
+from wifi_place_recognition.core.artifact import (_digest, load_model,
                                                   ModelFileError, save_model)
-from wifi_place_recognition.core.locator import calibrated_sigma, Locator, R95
+from wifi_place_recognition.core.locator import (calibrated_edge_sigma,
+                                                 calibrated_sigma, Locator,
+                                                 MAX_EDGE_SIGMA_M, R95)
 from wifi_place_recognition.core.preprocessing import signal
 
 
@@ -16,6 +19,18 @@ def _references(rng, n=300, n_aps=40, n_classes=3):
     classes = rng.integers(0, n_classes, n)
     xy = rng.uniform(-7700, -7600, (n, 2)) + [0, 4864900]
     return rssi.astype(np.float32), classes, xy
+
+
+def _rewrite_header(path, change):
+    """Change a model file's header in place (its checksum made anew)."""
+    with np.load(path) as f:
+        arrays = {k: f[k] for k in f.files}
+    header = json.loads(arrays.pop('header').tobytes())
+    header.pop('sha256')
+    change(header)
+    header['sha256'] = _digest(header, arrays)
+    arrays['header'] = np.frombuffer(json.dumps(header).encode(), np.uint8)
+    np.savez(path, **arrays)
 
 
 def _stored(locator, c):
@@ -108,6 +123,20 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
         save_model(replace(model, position=bad), tmp_path / 'bad.npz')
         with pytest.raises(ModelFileError, match=message):
             load_model(tmp_path / 'bad.npz')
+    # The circle's widening is kept; a file without one (older) has none.
+    model.position.edge_sigma = 2.5
+    save_model(model, tmp_path / 'm.npz')
+    assert load_model(tmp_path / 'm.npz').position.edge_sigma == 2.5
+    _rewrite_header(tmp_path / 'm.npz',
+                    lambda h: h['position'].pop('edge_sigma_m'))
+    assert load_model(tmp_path / 'm.npz').position.edge_sigma == 0.0
+    for value in (-1.0, MAX_EDGE_SIGMA_M + 1, float('nan'), 'wide', True):
+        bad = replace(model.position)
+        object.__setattr__(bad, 'edge_sigma', value)  # past its own check
+        save_model(replace(model, position=bad), tmp_path / 'bad.npz')
+        with pytest.raises(ModelFileError,
+                           match='edge_sigma_m must be a number'):
+            load_model(tmp_path / 'bad.npz')
     bad = replace(model.position)
     bad.metric = 'manhattan'
     save_model(replace(model, position=bad), tmp_path / 'bad.npz')
@@ -158,3 +187,45 @@ def test_sigma_scales_with_the_nearest_distance_calibrated_per_class():
     overall = np.quantile(errors / nearest, 0.95) / R95
     assert scale[3] == scale[4] == pytest.approx(overall)
     assert scale[0] < scale[1] < scale[2]
+
+
+def _corridor(edge_sigma):
+    """Return a locator of one class: 21 references 1 m apart along x."""
+    rng = np.random.default_rng(4)
+    rssi = rng.uniform(-90, -40, (21, 10)).astype(np.float32)
+    xy = np.column_stack([np.arange(21.0), np.zeros(21)])
+    return Locator.build(rssi, np.zeros(21, np.int64), xy, 1, 1,
+                         np.ones(1), edge_sigma=edge_sigma)
+
+
+def test_the_circle_widens_where_the_answer_lies_at_the_survey_edge():
+    plain, wide = _corridor(0.0), _corridor(4.0)
+    # at 18 m: 4 references within 5 m on one side, 2 on the other
+    for answer, edge in ((10, 0.0), (0, 4.0), (20, 4.0), (18, 4.0 / 81)):
+        distance = np.full(21, 5.0)
+        distance[answer] = 3.0          # k = 1: the answer is reference
+        xy, sigma = wide.weighted(distance, 1, 0)
+        np.testing.assert_allclose(xy, [answer, 0], atol=1e-5)
+        assert plain.weighted(distance, 1, 0)[1] == pytest.approx(3.0)
+        assert sigma == pytest.approx(np.hypot(3.0, edge), rel=1e-5)
+    with pytest.raises(ValueError, match='edge_sigma must be in'):
+        _corridor(-0.5)
+
+
+def test_the_edge_sigma_is_the_least_that_holds_95_percent():
+    rng = np.random.default_rng(5)
+    side = rng.uniform(0, 1, 4000)
+    sigma = rng.uniform(0.5, 2.0, 4000)
+    # one-sided answers are farther off than their sigma says
+    errors = np.hypot(sigma, 6 * side ** 4) * rng.rayleigh(1.0, 4000)
+    edge = calibrated_edge_sigma(errors, sigma, side)
+    inside = errors <= R95 * np.hypot(sigma, edge * side ** 4)
+    assert 0.95 <= inside.mean() < 0.9503
+    assert 4.0 < edge < 8.0
+    # already inside: nothing to widen
+    assert calibrated_edge_sigma(errors / 10, sigma, side) == 0.0
+    # no widening holds them (outside with side 0): at most the cap
+    assert calibrated_edge_sigma(errors * 10, sigma, side * 0) == \
+        MAX_EDGE_SIGMA_M
+    assert calibrated_edge_sigma(np.empty(0), np.empty(0),
+                                 np.empty(0)) == 0.0

@@ -19,7 +19,10 @@ from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.folds import grouped_folds
 from wifi_place_recognition.training.fitting import best_epoch
 from wifi_place_recognition.core.evaluation import align
-from wifi_place_recognition.core.locator import calibrated_sigma, Locator
+from wifi_place_recognition.core.coverage import one_sidedness
+from wifi_place_recognition.core.locator import (calibrated_edge_sigma,
+                                                 calibrated_sigma, EDGE_POWER,
+                                                 Locator, MIN_SIGMA)
 from wifi_place_recognition.core.preprocessing import signal
 from wifi_place_recognition.training.selection import (
     _covered, _cross_validate_position, _Split, COVERED_M, cross_validate,
@@ -431,3 +434,19 @@ def test_the_sigma_is_calibrated_on_held_out_scans_the_kept_ones_cover(
         rtol=1e-6)
     # the uncovered half of the held-out scans is placed much worse
     assert error[~covered].mean() > 2 * error[covered].mean()
+    # and calibrates how much an answer at the survey's edge is widened
+    assert chosen['edge_calibration_scans'] == (~covered).sum()
+    sigma = np.maximum(np.array(chosen['sigma_m'])[y[held]] * nearest,
+                       MIN_SIGMA)
+    xy = np.array([p[0][0] for p in placed])
+    side = np.array([one_sidedness(p[None] - locator.origin,
+                                   locator.reference_xy(c))[0]
+                     for p, c in zip(xy, y[held])])
+    edge = chosen['edge_sigma_m']
+    assert 0 < edge == pytest.approx(calibrated_edge_sigma(
+        error[~covered], sigma[~covered], side[~covered]), rel=1e-6)
+    inside = error <= R95 * np.hypot(sigma, edge * side ** EDGE_POWER)
+    # (half a floor unsurveyed: more than 15 m would be needed for 95 %)
+    assert (error <= R95 * sigma)[~covered].mean() + 0.05 < \
+        inside[~covered].mean()
+    assert inside[covered].mean() >= 0.95

@@ -18,7 +18,7 @@ import numpy as np
 
 from .atomic import atomic_write
 from .coverage import CoverageModel
-from .locator import LEVELS, Locator, METRICS
+from .locator import LEVELS, Locator, MAX_EDGE_SIGMA_M, METRICS
 from .model import ACTIVATIONS, Layer, PlaceModel
 from .preprocessing import RssiScaler, SIGNALS
 from .filter.particles import FusionParams
@@ -88,7 +88,8 @@ def save_model(model, path):
                               'neighbours': pos.neighbours,
                               'columns': list(pos.columns), 'units': 'm',
                               'representation': pos.representation,
-                              'metric': pos.metric}
+                              'metric': pos.metric,
+                              'edge_sigma_m': pos.edge_sigma}
     unpacked = sum(a.nbytes for a in arrays.values())
     if unpacked > MAX_UNPACKED_BYTES:
         raise ValueError(f'the model would unpack to {unpacked} bytes, more '
@@ -269,6 +270,11 @@ def _position(header, arrays, n_aps, n_classes):
             spec['metric'] not in METRICS:
         raise ModelFileError(f'position: representation must be one of '
                              f'{SIGNALS} and metric one of {METRICS}')
+    edge = spec.get('edge_sigma_m', 0.0)    # older files: not widened
+    if isinstance(edge, bool) or not isinstance(edge, (int, float)) or \
+            not 0 <= edge <= MAX_EDGE_SIGMA_M:
+        raise ModelFileError(f'position: edge_sigma_m must be a number in '
+                             f'[0, {MAX_EDGE_SIGMA_M:g}], not {edge!r}')
     a = {name: arrays[f'position.{name}'] for name in LOCATOR_ARRAYS}
     if not all(np.isfinite(v).all() for v in a.values()) or \
             not all((a[i] == np.round(a[i])).all() and (a[i] >= 0).all()
@@ -311,7 +317,7 @@ def _position(header, arrays, n_aps, n_classes):
     return Locator(origin, group_start, ap_start, ap_column, a['scale'],
                    a['codes'].astype(np.int8), a['norms'], a['xy'],
                    a['sigma'], group, n_aps, k, tuple(columns),
-                   spec['representation'], spec['metric'])
+                   spec['representation'], spec['metric'], float(edge))
 
 
 def _layers(specs, arrays, n_inputs, n_outputs):

@@ -25,6 +25,9 @@ import numpy as np
 COVERED_M = 3.0
 #: Position pairs one step of :func:`distance_to_survey` compares at most.
 PAIRS_PER_STEP = 1 << 20
+#: Survey positions within this distance (m) of an answer count for its
+#: :func:`one_sidedness`.
+EDGE_RADIUS_M = 5.0
 
 
 def distance_to_survey(xy, survey_xy):
@@ -65,6 +68,33 @@ def distance_by_place(xy, place, survey_xy, survey_place):
     for label in np.unique(mine):
         rows = mine == label
         out[rows] = distance_to_survey(xy[rows], survey_xy[theirs == label])
+    return out
+
+
+def one_sidedness(xy, survey_xy, radius=EDGE_RADIUS_M):
+    """
+    Return how one-sided the survey lies around each answer (0 to 1).
+
+    The mean resultant length of the directions from the answer ``xy``
+    ((n, 2) m) to the ``survey_xy`` positions within ``radius`` (those on
+    the answer itself not counted); 1 with fewer than two, NaN for an
+    answer with NaN. Inside a corridor the survey lies on both sides of
+    the answer (near 0); a scan taken where the survey never went is
+    answered at the edge of the nearest surveyed stretch (near 1). A
+    feature of geometry: it does not rest on signal-space distances,
+    which another day's signal offsets shift.
+    """
+    xy = np.asarray(xy, np.float64)
+    survey_xy = np.asarray(survey_xy, np.float64)
+    out = np.full(len(xy), np.nan)
+    for i, p in enumerate(xy):
+        if not np.isfinite(p).all():
+            continue
+        delta = survey_xy - p
+        dist = np.hypot(delta[:, 0], delta[:, 1])
+        near = (dist < radius) & (dist > 1e-6)
+        out[i] = 1.0 if near.sum() < 2 else float(np.linalg.norm(
+            (delta[near] / dist[near, None]).mean(axis=0)))
     return out
 
 

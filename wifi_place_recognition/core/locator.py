@@ -15,9 +15,11 @@ float64 origin.
 """
 
 from dataclasses import dataclass, field
+import math
 
 import numpy as np
 
+from .coverage import one_sidedness
 from .preprocessing import signal, SIGNALS
 
 #: Distances the k-NN can use: Euclidean, or Sorensen (Bray-Curtis),
@@ -30,6 +32,16 @@ R95 = float(np.sqrt(-2 * np.log(0.05)))
 MIN_SIGMA = 0.1
 #: Largest int8 code of a reference value.
 LEVELS = 127
+#: The largest edge sigma (m) a survey may calibrate
+#: (:func:`calibrated_edge_sigma`): a 95 % circle of 37 m around an answer
+#: at the survey's very edge.
+MAX_EDGE_SIGMA_M = 15.0
+#: The one-sidedness widens the sigma by its power: only answers with the
+#: survey nearly all on one side are widened much (1/16 at 0.5). Chosen
+#: on every dataset at hand (the panel's test files and the robot runs
+#: with survey holes) against 2: as many circles within 90-98 % and
+#: none widened past 98 % that was not already.
+EDGE_POWER = 4
 
 
 @dataclass
@@ -45,7 +57,13 @@ class Locator:
     scan unlike every reference is placed less surely): ``sigma[c]``
     (metres per unit of distance) was calibrated on held-out scans
     predicted as class c, so that a circle of 2.45 sigma holds 95 % of
-    them; it is at least :data:`MIN_SIGMA`.
+    them; it is at least :data:`MIN_SIGMA`. Held-out stretches the survey
+    never covered are placed at the edge of the nearest surveyed one, and
+    farther off than that sigma says, however like the references it
+    sounds: the sigma is widened to ``hypot(sigma, edge_sigma * side **
+    EDGE_POWER)``, side the answer's :func:`.coverage.one_sidedness`
+    among the references, ``edge_sigma`` (m) calibrated on held-out scans
+    off the survey (:func:`calibrated_edge_sigma`; 0: not widened).
     """
 
     origin: np.ndarray    # float64 (2,)
@@ -64,6 +82,7 @@ class Locator:
     columns: tuple = ('X', 'Y')
     representation: str = 'positive'  # one of preprocessing.SIGNALS
     metric: str = 'euclidean'         # one of METRICS
+    edge_sigma: float = 0.0   # m, added at a one-sided answer (see above)
     blocks: list = field(init=False, repr=False)   # views into codes
     row_of: np.ndarray = field(init=False, repr=False)  # (g, n_aps), -1
 
@@ -73,6 +92,10 @@ class Locator:
             raise ValueError(f'representation must be one of {SIGNALS} and '
                              f'metric one of {METRICS}, not '
                              f'{self.representation!r}, {self.metric!r}')
+        if not 0 <= self.edge_sigma <= MAX_EDGE_SIGMA_M:
+            raise ValueError(f'edge_sigma must be in [0, '
+                             f'{MAX_EDGE_SIGMA_M:g}] m, not '
+                             f'{self.edge_sigma!r}')
         n_groups = len(self.group_start) - 1
         refs = np.diff(self.group_start)
         rows = np.diff(self.ap_start)
@@ -88,7 +111,7 @@ class Locator:
     @classmethod
     def build(cls, rssi, classes, xy, n_classes, neighbours=5,
               sigma=None, columns=('X', 'Y'), representation='positive',
-              metric='euclidean', group=None):
+              metric='euclidean', group=None, edge_sigma=0.0):
         """
         Return a locator of reference scans ``rssi`` (dBm, NaN: undetected).
 
@@ -127,7 +150,8 @@ class Locator:
                    np.concatenate(norms).astype(np.float32),
                    (xy - origin).astype(np.float32),
                    np.asarray(sigma, np.float32), group, inputs.shape[1],
-                   int(neighbours), tuple(columns), representation, metric)
+                   int(neighbours), tuple(columns), representation, metric,
+                   float(edge_sigma))
 
     def locate(self, columns, rssi, c, neighbours=None):
         """
@@ -177,7 +201,11 @@ class Locator:
         if not len(distance):
             return np.full(2, np.nan), float('nan')
         xy, nearest = self.positions(distance, (k,), c)
-        return xy[0], max(float(self.sigma[c] * nearest), MIN_SIGMA)
+        sigma = max(float(self.sigma[c] * nearest), MIN_SIGMA)
+        if self.edge_sigma:
+            side = one_sidedness(xy - self.origin, self.reference_xy(c))[0]
+            sigma = math.hypot(sigma, self.edge_sigma * side ** EDGE_POWER)
+        return xy[0], sigma
 
     def positions(self, distance, ks, c):
         """
@@ -223,3 +251,24 @@ def calibrated_sigma(errors, nearest, predicted, n_classes, min_scans=30):
         if len(mine) >= min_scans:
             scale[c] = np.quantile(mine, 0.95) / R95
     return scale
+
+
+def calibrated_edge_sigma(errors, sigma, side, target=0.95):
+    """
+    Return the least edge sigma (m) that puts ``target`` of scans inside.
+
+    ``errors`` (m), ``sigma`` (m, the calibrated one) and ``side`` (the
+    answers' one-sidedness) of held-out scans: the smallest e (at most
+    :data:`MAX_EDGE_SIGMA_M`) for which ``target`` of them lie within
+    R95 hypot(sigma, e side^EDGE_POWER); 0 if they already do.
+    """
+    errors, sigma, side = (np.asarray(a, np.float64)
+                           for a in (errors, sigma, side))
+    if not len(errors):
+        return 0.0
+    missing = np.sqrt(np.maximum((errors / R95) ** 2 - sigma ** 2, 0.0))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        needed = np.where(missing == 0, 0.0, missing / side ** EDGE_POWER)
+    needed = np.nan_to_num(needed, nan=np.inf)
+    return float(min(np.quantile(needed, target, method='higher'),
+                     MAX_EDGE_SIGMA_M))

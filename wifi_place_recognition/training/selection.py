@@ -16,9 +16,11 @@ import numpy as np
 import torch
 
 from ..core.coverage import (COVERED_M, distance_by_place,
-                             features as coverage_features, unheard_share)
+                             features as coverage_features, one_sidedness,
+                             unheard_share)
 from ..core.evaluation import align
-from ..core.locator import calibrated_sigma, Locator, METRICS
+from ..core.locator import (calibrated_edge_sigma, calibrated_sigma,
+                            Locator, METRICS)
 from ..core.metrics import expected_calibration_error
 from ..core.model import tempered
 from ..core.preprocessing import signal, SIGNALS
@@ -192,6 +194,9 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
     the held-out scans within :data:`COVERED_M` of a kept scan of their
     class (a fold also holds out stretches no kept scan covers, which
     made the circle too wide where the robot is, inside the survey).
+    Those off the survey calibrate how much an answer at the survey's
+    edge is widened (:func:`.locator.calibrated_edge_sigma`; all
+    held-out scans when fewer than :data:`MIN_COVERED` are off it).
     """
     ks = (config.neighbours,) if config.neighbours else NEIGHBOURS
     spaces = _spaces(config)
@@ -231,15 +236,22 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
         error[calibrating],
         np.concatenate(nearest[rep, metric, scope])[calibrating],
         np.concatenate(predicted)[calibrating], n_classes)
+    examples, circle = _held_out_answers(
+        splits, predicted, n_classes, (rep, metric, scope), k, sigma)
+    off = np.isfinite(circle[0]) & ~examples[1]
+    if off.sum() < MIN_COVERED:
+        off = np.isfinite(circle[0])
+    edge = calibrated_edge_sigma(*circle[:, off])
+    log(f'position: an answer at the survey\'s edge widened by {edge:.2f} '
+        f'm (calibrated on {int(off.sum())} held-out scans off the survey)')
     return {'neighbours': k, 'position_representation': rep,
             'position_metric': metric, 'position_scope': scope,
             'position_mean_error_m': mean[best],
             'position_median_error_m': float(np.median(error[placed])),
             'sigma_calibration_scans': int(calibrating.sum()),
-            'sigma_m': sigma.tolist(),
-            COVERAGE_EXAMPLES: _coverage_examples(
-                splits, predicted, n_classes, (rep, metric, scope), k,
-                sigma)}
+            'sigma_m': sigma.tolist(), 'edge_sigma_m': edge,
+            'edge_calibration_scans': int(off.sum()),
+            COVERAGE_EXAMPLES: examples}
 
 
 #: The key of the selection summary that carries the held-out scans'
@@ -247,30 +259,38 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
 COVERAGE_EXAMPLES = 'coverage_examples'
 
 
-def _coverage_examples(splits, predicted, n_classes, space, k, sigma):
+def _held_out_answers(splits, predicted, n_classes, space, k, sigma):
     """
-    Return (features, covered, fold) of every held-out scan, as placed.
+    Return the held-out scans' coverage examples and circle figures.
 
-    Among the kept scans of each fold, in the chosen space, with the
-    calibrated sigma (``features`` of
-    :mod:`wifi_place_recognition.core.coverage`).
+    Each held-out scan placed among the kept scans of its fold, in the
+    chosen space, with the calibrated sigma: (features, covered, fold)
+    of every one (``features`` of
+    :mod:`wifi_place_recognition.core.coverage`), and the rows error (m),
+    sigma (m) and one-sidedness of its answer (NaN where none).
     """
     rep, metric, scope = space
-    x, covered, fold = [], [], []
+    x, covered, fold, circle = [], [], [], []
     for f, (split, classes) in enumerate(zip(splits, predicted)):
         keep = split.keep
         locator = Locator.build(
             split.fp.rssi[keep], split.y, split.fp.position[keep],
             n_classes, k, sigma, representation=rep, metric=metric,
             group=_groups(split.fp, split.all_y, n_classes, scope))
-        for rssi, c in zip(split.held_rssi, classes):
+        for rssi, c, truth in zip(split.held_rssi, classes,
+                                  split.held_position):
             cols = np.flatnonzero(~np.isnan(rssi))
-            x.append(coverage_features(
-                locator, locator.distances(cols, signal(rssi[cols], rep), c),
-                c, unheard_share(locator, cols, c)))
+            distance = locator.distances(cols, signal(rssi[cols], rep), c)
+            x.append(coverage_features(locator, distance, c,
+                                       unheard_share(locator, cols, c)))
+            xy, scan_sigma = locator.weighted(distance, k, c)
+            circle.append((float(np.linalg.norm(xy - truth)), scan_sigma,
+                           one_sidedness(xy[None] - locator.origin,
+                                         locator.reference_xy(c))[0]))
         covered.append(_covered(split))
         fold.append(np.full(len(split.held_y), f))
-    return np.array(x), np.concatenate(covered), np.concatenate(fold)
+    return ((np.array(x), np.concatenate(covered), np.concatenate(fold)),
+            np.array(circle, np.float64).reshape(-1, 3).T)
 
 
 #: The sigma is calibrated on held-out scans taken within COVERED_M of a
@@ -313,7 +333,8 @@ def reference_locator(fp, y, n_classes, selection):
                          selection['position_representation'],
                          selection['position_metric'],
                          _groups(fp, y, n_classes,
-                                 selection['position_scope']))
+                                 selection['position_scope']),
+                         selection['edge_sigma_m'])
 
 
 #: The temperatures :func:`fit_temperature` chooses from (bounds): it
