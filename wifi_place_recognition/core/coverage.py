@@ -85,16 +85,20 @@ def one_sidedness(xy, survey_xy, radius=EDGE_RADIUS_M):
     which another day's signal offsets shift.
     """
     xy = np.asarray(xy, np.float64)
-    survey_xy = np.asarray(survey_xy, np.float64)
+    survey_xy = np.asarray(survey_xy)     # float32 (relative) stays so
     out = np.full(len(xy), np.nan)
     for i, p in enumerate(xy):
         if not np.isfinite(p).all():
             continue
-        delta = survey_xy - p
-        dist = np.hypot(delta[:, 0], delta[:, 1])
-        near = (dist < radius) & (dist > 1e-6)
-        out[i] = 1.0 if near.sum() < 2 else float(np.linalg.norm(
-            (delta[near] / dist[near, None]).mean(axis=0)))
+        delta = survey_xy - p.astype(survey_xy.dtype)
+        d2 = np.einsum('ij,ij->i', delta, delta)
+        near = np.flatnonzero((d2 < radius ** 2) & (d2 > 1e-12))
+        if len(near) < 2:
+            out[i] = 1.0
+            continue
+        towards = delta[near].astype(np.float64)
+        towards /= np.sqrt(d2[near])[:, None]
+        out[i] = float(np.linalg.norm(towards.mean(axis=0)))
     return out
 
 

@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from .coverage import one_sidedness
+from .coverage import EDGE_RADIUS_M, one_sidedness
 from .preprocessing import signal, SIGNALS
 
 #: Distances the k-NN can use: Euclidean, or Sorensen (Bray-Curtis),
@@ -85,6 +85,7 @@ class Locator:
     edge_sigma: float = 0.0   # m, added at a one-sided answer (see above)
     blocks: list = field(init=False, repr=False)   # views into codes
     row_of: np.ndarray = field(init=False, repr=False)  # (g, n_aps), -1
+    by_x: list = field(init=False, repr=False)  # per group: (order, x)
 
     def __post_init__(self):
         """Index the blocks: each group's rows by model AP column."""
@@ -107,6 +108,11 @@ class Locator:
             self.row_of[g, self.ap_column[self.ap_start[g]:
                                           self.ap_start[g + 1]]] = \
                 np.arange(rows[g])
+        self.by_x = []
+        for g in range(n_groups):
+            x = self.xy[self.group_start[g]:self.group_start[g + 1], 0]
+            order = np.argsort(x, kind='stable')
+            self.by_x.append((order, x[order]))
 
     @classmethod
     def build(cls, rssi, classes, xy, n_classes, neighbours=5,
@@ -203,9 +209,17 @@ class Locator:
         xy, nearest = self.positions(distance, (k,), c)
         sigma = max(float(self.sigma[c] * nearest), MIN_SIGMA)
         if self.edge_sigma:
-            side = one_sidedness(xy - self.origin, self.reference_xy(c))[0]
+            at = xy[0] - self.origin
+            side = one_sidedness(at[None], self._slab(c, at[0]))[0]
             sigma = math.hypot(sigma, self.edge_sigma * side ** EDGE_POWER)
         return xy[0], sigma
+
+    def _slab(self, c, x):
+        """Return c's reference positions (- origin) within EDGE_RADIUS_M in x."""
+        order, sorted_x = self.by_x[self.group[c]]
+        first, last = np.searchsorted(sorted_x, (x - EDGE_RADIUS_M,
+                                                 x + EDGE_RADIUS_M))
+        return self.reference_xy(c)[order[first:last]]
 
     def positions(self, distance, ks, c):
         """

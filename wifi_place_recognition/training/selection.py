@@ -239,11 +239,12 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
     examples, circle = _held_out_answers(
         splits, predicted, n_classes, (rep, metric, scope), k, sigma)
     off = np.isfinite(circle[0]) & ~examples[1]
+    which = 'off the survey'
     if off.sum() < MIN_COVERED:
-        off = np.isfinite(circle[0])
+        off, which = np.isfinite(circle[0]), 'placed (too few off the survey)'
     edge = calibrated_edge_sigma(*circle[:, off])
     log(f'position: an answer at the survey\'s edge widened by {edge:.2f} '
-        f'm (calibrated on {int(off.sum())} held-out scans off the survey)')
+        f'm (calibrated on {int(off.sum())} held-out scans {which})')
     return {'neighbours': k, 'position_representation': rep,
             'position_metric': metric, 'position_scope': scope,
             'position_mean_error_m': mean[best],
