@@ -131,8 +131,13 @@ class Survey:
 
 
 def working_streams(model, run):
-    """Return W's scan stream, fused stream (seed 0) and places."""
-    proba, xy, sigma = model.predict_positions(align(model, run.fp))
+    """
+    Return W's scan stream, fused stream (seed 0) and places.
+
+    The scans' k-NN sigma, as the monitor reads it (not widened).
+    """
+    proba, xy, sigma = model.predict_positions(align(model, run.fp),
+                                               widened=False)
     scans = (run.stamps, xy, sigma)
     fxy, fyaw, fcov = fuse_offline(run.odometry, scans,
                                    Fusion(model.fusion, seed=0))

@@ -157,8 +157,14 @@ def train(test, others, folder, with_holes):
 
 
 def scan_stream(model, run):
-    """Return the scans' own positions: (t, xy (n, 2), sigma (n,))."""
-    _, xy, sigma = model.predict_positions(align(model, run.fp))
+    """
+    Return the scans' own positions: (t, xy (n, 2), sigma (n,)).
+
+    The k-NN's sigma, as classifier_node gives it to the monitor
+    (``scan_knn_sigma_m``), not widened at the survey's edge.
+    """
+    _, xy, sigma = model.predict_positions(align(model, run.fp),
+                                           widened=False)
     return run.stamps, xy, sigma
 
 

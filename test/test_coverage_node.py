@@ -1,6 +1,5 @@
 """Each scan's coverage on ~/place, over real ROS, as the core gives it."""
 
-from dataclasses import replace
 from pathlib import Path
 
 from conftest import python_module, run
@@ -34,10 +33,8 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
             client, proc, model):
         _, _, sigma, expected = model.predict_positions(align(model, fp),
                                                         coverage=True)
-        plain = replace(model.position, edge_sigma=0.0)
-        narrow = replace(model, position=plain).predict_positions(
-            align(model, fp))[2]
-        got, sigmas = [], []
+        narrow = model.predict_positions(align(model, fp), widened=False)[2]
+        got, sigmas, knn = [], [], []
         for row in rows:
             detected = np.flatnonzero(np.isfinite(fp.rssi[row]))
             status = client.resend_until_answered(client.scan(
@@ -47,6 +44,7 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
             values = status_values(status)
             got.append(float(values['coverage']))
             sigmas.append(float(values['scan_sigma_m']))
+            knn.append(float(values['scan_knn_sigma_m']))
         np.testing.assert_allclose(got, expected[rows], atol=2e-3)
         assert all(0.0 <= p <= 1.0 for p in got)
         # each scan's own sigma, widened where the answer lies at the
@@ -55,3 +53,5 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
         np.testing.assert_allclose(sigmas, sigma[rows], rtol=1e-3,
                                    atol=2e-3)
         assert (np.array(sigmas[3:]) > narrow[rows[3:]] + 1.0).all()
+        # and the k-NN's, which the localization monitor reads
+        np.testing.assert_allclose(knn, narrow[rows], rtol=1e-3, atol=2e-3)

@@ -283,14 +283,17 @@ def test_with_no_localiser_pose_the_sure_fused_pose_seeds_it(monitor, ros):
     assert m.verdicts == [False]
 
 
-def place_answer(t, xy, sigma):
+def place_answer(t, xy, sigma, knn_sigma=None):
     """Return a ~/place answer as classifier_node sends it (some keys)."""
     msg = DiagnosticArray(status=[DiagnosticStatus(
         name='classifier_node: place', values=[
             key_value('building', 0), key_value('floor', 0),
             key_value('scan_x', f'{xy[0]:.3f}'),
             key_value('scan_y', f'{xy[1]:.3f}'),
-            key_value('scan_sigma_m', f'{sigma:.3f}')])])
+            key_value('scan_sigma_m', f'{sigma:.3f}')] + ([] if knn_sigma
+            is None else [key_value('scan_knn_sigma_m',
+                                    f'{knn_sigma:.3f}')])
+    )])
     msg.header.stamp.sec = int(t)
     return msg
 
@@ -432,3 +435,19 @@ def test_parameters_are_refused_in_their_own_terms(monitor, ros):
         'against /classifier_node/pose and /classifier_node/place in frame ' \
         'map: agree_sigmas 3, alarm 60, max_scan_sigma 3 m, ' \
         'initial_pose_on_lost false' in log, log
+
+
+def test_the_monitor_reads_the_scans_k_nn_sigma_not_the_widened_one(
+        monitor, ros):
+    # an answer at the survey's edge: its 95 % circle widened to 6 m, its
+    # k-NN sigma 1 m (what the thresholds were chosen on): it testifies
+    here = survey_of(load_model(default_model_path()), 'map')['map'][0]
+    m = monitor('knn_monitor')
+    answers = ros.create_publisher(DiagnosticArray, 'classifier_node/place',
+                                   RELIABLE)
+    assert wait_until(lambda: answers.get_subscription_count(), 30, ros)
+    for k in range(10):
+        m.send_local(pose(T0 + k, *here, 0.0))
+        answers.publish(place_answer(T0 + k, here, 6.0, knn_sigma=1.0))
+        m.spin()
+    m.wait_state('agrees')

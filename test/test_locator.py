@@ -204,10 +204,13 @@ def test_the_circle_widens_where_the_answer_lies_at_the_survey_edge():
     for answer, edge in ((10, 0.0), (0, 4.0), (20, 4.0), (18, 4.0 / 81)):
         distance = np.full(21, 5.0)
         distance[answer] = 3.0          # k = 1: the answer is reference
-        xy, sigma = wide.weighted(distance, 1, 0)
+        xy, knn = wide.weighted(distance, 1, 0)
         np.testing.assert_allclose(xy, [answer, 0], atol=1e-5)
-        assert plain.weighted(distance, 1, 0)[1] == pytest.approx(3.0)
-        assert sigma == pytest.approx(np.hypot(3.0, edge), rel=1e-5)
+        assert knn == plain.weighted(distance, 1, 0)[1] == \
+            pytest.approx(3.0)
+        assert plain.widened(xy, knn, 0) == knn
+        assert wide.widened(xy, knn, 0) == pytest.approx(np.hypot(3.0, edge),
+                                                         rel=1e-5)
     with pytest.raises(ValueError, match='edge_sigma must be in'):
         _corridor(-0.5)
 

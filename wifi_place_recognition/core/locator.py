@@ -207,12 +207,21 @@ class Locator:
         if not len(distance):
             return np.full(2, np.nan), float('nan')
         xy, nearest = self.positions(distance, (k,), c)
-        sigma = max(float(self.sigma[c] * nearest), MIN_SIGMA)
-        if self.edge_sigma:
-            at = xy[0] - self.origin
-            side = one_sidedness(at[None], self._slab(c, at[0]))[0]
-            sigma = math.hypot(sigma, self.edge_sigma * side ** EDGE_POWER)
-        return xy[0], sigma
+        return xy[0], max(float(self.sigma[c] * nearest), MIN_SIGMA)
+
+    def widened(self, xy, sigma, c):
+        """
+        Return the sigma (m) of an answer ``xy`` of class c, widened.
+
+        hypot(sigma, edge_sigma * side ** EDGE_POWER), side the answer's
+        one-sidedness among c's references: the 95 % circle's sigma.
+        ``sigma``: the k-NN's (:meth:`weighted`).
+        """
+        if not self.edge_sigma or not np.isfinite(xy).all():
+            return sigma
+        at = np.asarray(xy, np.float64) - self.origin
+        side = one_sidedness(at[None], self._slab(c, at[0]))[0]
+        return math.hypot(sigma, self.edge_sigma * side ** EDGE_POWER)
 
     def _slab(self, c, x):
         """Return c's reference positions (- origin) within EDGE_RADIUS_M in x."""

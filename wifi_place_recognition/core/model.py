@@ -155,11 +155,12 @@ class PlaceModel:
         """
         return self.scaler.transform(rssi, columns) - self.blank[columns]
 
-    def predict_positions(self, rssi, coverage=False):
+    def predict_positions(self, rssi, coverage=False, widened=True):
         """
         Return (class probabilities, xy metres (n, 2), sigma metres (n,)).
 
-        The batch form of :meth:`locate`; with ``coverage``, each scan's
+        The batch form of :meth:`locate`: the sigma of the 95 % circle, or
+        with ``widened`` false the k-NN's; with ``coverage``, each scan's
         probability of being covered (n,) too.
 
         Raises ValueError for a model without a position output.
@@ -173,29 +174,34 @@ class PlaceModel:
         sigma, covered = np.empty(len(best)), np.full(len(best), np.nan)
         for i, (row, c) in enumerate(zip(np.asarray(rssi, np.float32), best)):
             columns = np.flatnonzero(~np.isnan(row))
-            xy[i], sigma[i], p = self.locate(columns, row[columns], c,
-                                             coverage=coverage)
+            xy[i], circle, p, knn = self.locate(columns, row[columns], c,
+                                                coverage=coverage)
+            sigma[i] = circle if widened else knn
             covered[i] = np.nan if p is None else p
         return (proba, xy, sigma) + ((covered,) if coverage else ())
 
     def locate(self, columns, rssi, c, unknown=0, coverage=True):
         """
-        Return (xy (2,), sigma m, P(covered) or None) of one scan of class c.
+        Return (xy (2,), sigma m, P(covered) or None, k-NN sigma m).
 
-        ``columns``/``rssi``: its APs known to the model and their readings
-        (dBm); ``unknown``: how many more it heard. The probability is
-        None without a coverage model (or ``coverage`` false).
+        Of one scan of class c: ``sigma`` is its 95 % circle's (widened at
+        the survey's edge, :meth:`.locator.Locator.widened`), the k-NN
+        sigma the one before. ``columns``/``rssi``: its APs known to the
+        model and their readings (dBm); ``unknown``: how many more it
+        heard. The probability is None without a coverage model (or
+        ``coverage`` false).
         """
         locator = self.position
         distance = locator.distances(
             columns, signal(rssi, locator.representation), c)
-        xy, sigma = locator.weighted(distance, locator.neighbours, c)
+        xy, knn = locator.weighted(distance, locator.neighbours, c)
+        sigma = locator.widened(xy, knn, c)
         if self.coverage is None or not coverage:
-            return xy, sigma, None
+            return xy, sigma, None, knn
         x = features(locator, distance, c,
                      unheard_share(locator, columns, c, unknown))
         return xy, sigma, float(self.coverage.probability(x)) \
-            if np.isfinite(x).all() else None
+            if np.isfinite(x).all() else None, knn
 
     @property
     def class_names(self):

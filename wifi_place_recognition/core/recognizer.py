@@ -32,6 +32,7 @@ class Place:
     scan_position: np.ndarray = None  # (2,) this scan alone
     scan_sigma: float = float('nan')  # m, this scan alone
     coverage: float = None      # P(this scan is where the survey covers)
+    scan_knn_sigma: float = float('nan')  # m, before the edge widening
 
     @property
     def position_sigma(self):
@@ -104,10 +105,10 @@ class PlaceRecognizer:
         scan_building, scan_floor = (int(v) for v in self.model.classes[best])
         scan_confidence = float(proba[best])
         xy = cov = coverage = None
-        sigma = float('nan')
+        sigma = knn_sigma = float('nan')
         if self.model.position is not None:
-            xy, sigma, coverage = self.model.locate(columns, scan.rssi, best,
-                                                    scan.unknown)
+            xy, sigma, coverage, knn_sigma = self.model.locate(
+                columns, scan.rssi, best, scan.unknown)
             cov = np.eye(2) * sigma ** 2
         scan_xy = xy
         if self.tracker is None or time is None:
@@ -133,7 +134,7 @@ class PlaceRecognizer:
         return Place(building, floor, confidence, probabilities, scan.known,
                      scan.unknown, scan.clipped, level, message,
                      scan_building, scan_floor, scan_confidence, xy, cov,
-                     scan_xy, sigma, coverage)
+                     scan_xy, sigma, coverage, knn_sigma)
 
 
 def step_sigmas(before_xy, before_cov, after_xy):

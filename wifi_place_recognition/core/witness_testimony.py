@@ -3,8 +3,7 @@ What each witness testifies, and how far apart it says the localiser is.
 
 A scan testifies when :func:`scan_doubt` has nothing against it (its
 sigma up to ``max_scan_sigma``: a scan unlike every surveyed one, the
-k-NN's sigma grows with that, or answered at the survey's edge, where it
-is widened, snaps to the nearest surveyed place) and
+k-NN's sigma grows with that, snaps to the nearest surveyed place) and
 the survey covers the localiser's position (:func:`covered`). The
 distances are Mahalanobis distances under the sum of both covariances,
 plus floors for what neither knows and the distance the robot moved since

@@ -285,6 +285,7 @@ class ClassifierNode(Node):
                 _kv('scan_x', f'{place.scan_position[0]:.3f}'),
                 _kv('scan_y', f'{place.scan_position[1]:.3f}'),
                 _kv('scan_sigma_m', f'{place.scan_sigma:.3f}'),
+                _kv('scan_knn_sigma_m', f'{place.scan_knn_sigma:.3f}'),
                 _kv('coverage', 'nan' if place.coverage is None else
                     f'{place.coverage:.3f}')]
 

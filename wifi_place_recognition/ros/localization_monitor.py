@@ -248,7 +248,10 @@ class LocalizationMonitor(Node):
             values = {kv.key: kv.value for kv in status.values}
             try:
                 xy = (float(values['scan_x']), float(values['scan_y']))
-                sigma = float(values['scan_sigma_m'])
+                # the k-NN's sigma, which the thresholds were chosen on
+                # (a node before round 9 sends only scan_sigma_m, the same)
+                sigma = float(values.get('scan_knn_sigma_m',
+                                         values['scan_sigma_m']))
                 frame = self.frame_id.format(
                     building=int(values['building']),
                     floor=int(values['floor']))
