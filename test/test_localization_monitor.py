@@ -285,15 +285,14 @@ def test_with_no_localiser_pose_the_sure_fused_pose_seeds_it(monitor, ros):
 
 def place_answer(t, xy, sigma, knn_sigma=None):
     """Return a ~/place answer as classifier_node sends it (some keys)."""
+    values = [key_value('building', 0), key_value('floor', 0),
+              key_value('scan_x', f'{xy[0]:.3f}'),
+              key_value('scan_y', f'{xy[1]:.3f}'),
+              key_value('scan_sigma_m', f'{sigma:.3f}')]
+    if knn_sigma is not None:
+        values.append(key_value('scan_knn_sigma_m', f'{knn_sigma:.3f}'))
     msg = DiagnosticArray(status=[DiagnosticStatus(
-        name='classifier_node: place', values=[
-            key_value('building', 0), key_value('floor', 0),
-            key_value('scan_x', f'{xy[0]:.3f}'),
-            key_value('scan_y', f'{xy[1]:.3f}'),
-            key_value('scan_sigma_m', f'{sigma:.3f}')] + ([] if knn_sigma
-            is None else [key_value('scan_knn_sigma_m',
-                                    f'{knn_sigma:.3f}')])
-    )])
+        name='classifier_node: place', values=values)])
     msg.header.stamp.sec = int(t)
     return msg
 
