@@ -380,13 +380,19 @@ def test_with_nothing_to_compare_wifi_cannot_tell_at_once(monitor, ros):
     assert 'localiser agrees with WiFi' in log, log
 
 
-def test_a_wide_fused_pose_and_scans_off_the_survey_cannot_tell(
-        monitor, ros):
+def surveyed_monitor(monitor, ros, name):
+    """Return a surveyed spot, a monitor and a ~/place publisher to it."""
     here = survey_of(load_model(default_model_path()), 'map')['map'][0]
-    m = monitor('wide_monitor')
+    m = monitor(name)
     answers = ros.create_publisher(DiagnosticArray, 'classifier_node/place',
                                    RELIABLE)
     assert wait_until(lambda: answers.get_subscription_count(), 30, ros)
+    return here, m, answers
+
+
+def test_a_wide_fused_pose_and_scans_off_the_survey_cannot_tell(
+        monitor, ros):
+    here, m, answers = surveyed_monitor(monitor, ros, 'wide_monitor')
     for k in range(10):     # the filter 11 m wide, the scans unlike any
         m.send_local(pose(T0 + k, *here, 0.0))
         m.fused.publish(pose(T0 + k, *here, 0.0, sd=11.0, yaw_sd=0.05))
@@ -440,13 +446,10 @@ def test_the_monitor_reads_the_scans_k_nn_sigma_not_the_widened_one(
         monitor, ros):
     # an answer at the survey's edge: its 95 % circle widened to 6 m, its
     # k-NN sigma 1 m (what the thresholds were chosen on): it testifies
-    here = survey_of(load_model(default_model_path()), 'map')['map'][0]
-    m = monitor('knn_monitor')
-    answers = ros.create_publisher(DiagnosticArray, 'classifier_node/place',
-                                   RELIABLE)
-    assert wait_until(lambda: answers.get_subscription_count(), 30, ros)
+    here, m, answers = surveyed_monitor(monitor, ros, 'knn_monitor')
     for k in range(10):
         m.send_local(pose(T0 + k, *here, 0.0))
         answers.publish(place_answer(T0 + k, here, 6.0, knn_sigma=1.0))
         m.spin()
     m.wait_state('agrees')
+    ros.destroy_publisher(answers)

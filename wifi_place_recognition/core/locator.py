@@ -219,16 +219,22 @@ class Locator:
         """
         if not self.edge_sigma or not np.isfinite(xy).all():
             return sigma
-        at = np.asarray(xy, np.float64) - self.origin
-        side = one_sidedness(at[None], self._slab(c, at[0]))[0]
-        return math.hypot(sigma, self.edge_sigma * side ** EDGE_POWER)
+        return math.hypot(sigma, self.edge_sigma *
+                          self.one_sidedness(xy, c) ** EDGE_POWER)
 
-    def _slab(self, c, x):
-        """Return c's reference positions (- origin) within EDGE_RADIUS_M in x."""
+    def one_sidedness(self, xy, c):
+        """
+        Return the :func:`.coverage.one_sidedness` of an answer xy (m).
+
+        Among the references class c searches; only those within
+        EDGE_RADIUS_M of it in x are read (kept sorted by x).
+        """
+        at = np.asarray(xy, np.float64) - self.origin
         order, sorted_x = self.by_x[self.group[c]]
-        first, last = np.searchsorted(sorted_x, (x - EDGE_RADIUS_M,
-                                                 x + EDGE_RADIUS_M))
-        return self.reference_xy(c)[order[first:last]]
+        first, last = np.searchsorted(sorted_x, (at[0] - EDGE_RADIUS_M,
+                                                 at[0] + EDGE_RADIUS_M))
+        return one_sidedness(at[None],
+                             self.reference_xy(c)[order[first:last]])[0]
 
     def positions(self, distance, ks, c):
         """

@@ -16,8 +16,7 @@ import numpy as np
 import torch
 
 from ..core.coverage import (COVERED_M, distance_by_place,
-                             features as coverage_features, one_sidedness,
-                             unheard_share)
+                             features as coverage_features, unheard_share)
 from ..core.evaluation import align
 from ..core.locator import (calibrated_edge_sigma, calibrated_sigma,
                             Locator, METRICS)
@@ -286,8 +285,7 @@ def _held_out_answers(splits, predicted, n_classes, space, k, sigma):
                                        unheard_share(locator, cols, c)))
             xy, scan_sigma = locator.weighted(distance, k, c)
             circle.append((float(np.linalg.norm(xy - truth)), scan_sigma,
-                           one_sidedness(xy[None] - locator.origin,
-                                         locator.reference_xy(c))[0]))
+                           locator.one_sidedness(xy, c)))
         covered.append(_covered(split))
         fold.append(np.full(len(split.held_y), f))
     return ((np.array(x), np.concatenate(covered), np.concatenate(fold)),
