@@ -25,6 +25,7 @@ def test_nothing_is_trusted_while_lost_waiting_or_uncertain():
     assert verdict(witness='lost') == 'lost'
     assert verdict(witness='waiting') == 'witness_waiting'
     assert verdict(witness=None) == 'witness_waiting'
+    assert verdict(witness='gone') == 'witness_gone'
     assert verdict(place=None) == 'no_place'
     assert verdict(pose=None) == 'no_pose'
     assert verdict(stamp=100.0 + P.max_pose_age + 0.1) == 'no_pose'
@@ -36,8 +37,9 @@ def test_nothing_is_trusted_while_lost_waiting_or_uncertain():
     # settled, but WiFi has not agreed since the jump
     assert verdict(last_jump=100.5 - P.settle_s - 0.1,
                    confirmed=False) == 'unconfirmed'
-    assert set(REASONS) == {'no_place', 'witness_waiting', 'lost', 'disagrees',
-                            'no_pose', 'uncertain', 'jumped', 'unconfirmed'}
+    assert set(REASONS) == {'no_place', 'witness_waiting', 'witness_gone',
+                            'lost', 'disagrees', 'no_pose', 'uncertain',
+                            'jumped', 'unconfirmed'}
 
 
 def test_a_jump_is_a_step_faster_than_driving_or_another_frame():

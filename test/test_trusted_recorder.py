@@ -37,6 +37,11 @@ PHASES = [('agrees', 0.1, 0.0, 4), ('lost', 0.1, 0.0, 4),
 #: The last scan of the first cannot_tell phase is not: its label comes
 #: from the pose after it too, of the uncertain phase.
 RECORDED = [0, 1, 2, 3, 8, 9, 10, 28, 29, 30, 31]
+#: classifier_node's current place: building 0, floor 1.
+PLACE = DiagnosticArray(status=[DiagnosticStatus(
+    name='classifier_node: current place', values=[
+        key_value('building', 0), key_value('floor', 1),
+        key_value('frame_id', 'map')])])
 
 
 class Recorder:
@@ -113,10 +118,7 @@ class Recorder:
 def test_scans_are_recorded_while_trusted_also_where_wifi_cannot_tell(
         ros, tmp_path):
     r = Recorder(ros, tmp_path)
-    r.place.publish(DiagnosticArray(status=[DiagnosticStatus(
-        name='classifier_node: current place', values=[
-            key_value('building', 0), key_value('floor', 1),
-            key_value('frame_id', 'map')])]))
+    r.place.publish(PLACE)
     r.wait_for('place', 'B0F1')
     k = 0
     for state, sd, offset, scans in PHASES:
@@ -146,3 +148,45 @@ def test_scans_are_recorded_while_trusted_also_where_wifi_cannot_tell(
     assert values['localizer_jumps'] == '1', values
     assert 'not recording: the WiFi witness says the localiser is lost' \
         in log and 'the localiser jumped 10.50 m in 1.00 s' in log, log
+
+
+def test_a_stopped_witness_or_place_publisher_stops_recording(ros, tmp_path):
+    """
+    A latched state outlives its publisher: a dead monitor's ``agrees``.
+
+    Recorded while the witness agrees; its publisher destroyed: nothing
+    (``skipped/witness_gone``) until a new one says agrees; the current
+    place's publisher destroyed: nothing (``skipped/no_place``).
+    """
+    r = Recorder(ros, tmp_path)
+    r.place.publish(PLACE)
+    r.wait_for('place', 'B0F1')
+    r.say('agrees')
+    k = 0
+    for phase in range(4):
+        if phase == 1:
+            ros.destroy_publisher(r.status)
+            r.wait_for('witness', 'gone')
+        elif phase == 2:
+            r.status = ros.create_publisher(
+                String, 'localization_monitor/status', LATCHED)
+            r.say('agrees')
+        elif phase == 3:
+            ros.destroy_publisher(r.place)
+            r.wait_for('place', '')
+        for _ in range(4):
+            r.step(k, 0.1, 0.0)
+            k += 1
+    r.wait_for('scans_received', k)
+    values = r.progress[-1]
+    log = r.close()
+    with open(r.output) as f:
+        steps = [round(float(row['TIMESTAMP']) - T0 - 0.1)
+                 for row in csv.DictReader(f)]
+    # the last scan of a phase before a stop is labelled by the next
+    # phase's first pose, judged with the witness it came with
+    assert steps == [0, 1, 2, 3, 8, 9, 10, 11], (steps, values, log)
+    assert values['skipped/witness_gone'] == '4', values
+    # the last scan waits for a pose after it (judged at the stop)
+    assert values['skipped/no_place'] == '3', values
+    assert 'the witness stopped' in log, log

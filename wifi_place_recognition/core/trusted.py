@@ -11,7 +11,8 @@ at most ``max_sd`` metres, and no jump of the localiser (:func:`is_jump`)
 be in the ``settle_s`` seconds before the scan or since; the WiFi
 witness (localization_monitor's state) must say neither ``lost`` nor
 ``disagrees`` (evidence against the localiser gathering), and must have
-started (not ``waiting``). Its ``cannot_tell`` does not block:
+started (not ``waiting``) and not stopped (:data:`GONE`: its latched
+state outlives it, so a dead witness's ``agrees`` must not). Its ``cannot_tell`` does not block:
 inside a survey hole WiFi cannot testify, and that is where recording
 matters; except after a jump: a jump may be a correction or the
 localiser going wrong, and only WiFi can tell which, so after one
@@ -30,10 +31,15 @@ import math
 from .pose_label import blend, HeldScans, MAX_POSE_AGE
 from .witness import AGREES, CANNOT_TELL, DISAGREES, LOST
 
+#: The witness's state once its publisher is gone (a stopped monitor).
+GONE = 'gone'
+
 #: Why a scan was not trusted, and what that means.
 REASONS = {
-    'no_place': 'no current place (building, floor) yet',
+    'no_place': 'no current place (building, floor): none yet, or its '
+                'publisher gone',
     'witness_waiting': 'the WiFi witness has not started',
+    'witness_gone': 'the WiFi witness stopped (its publisher is gone)',
     'lost': 'the WiFi witness says the localiser is lost',
     'disagrees': 'the WiFi witness disagrees with the localiser so far',
     'no_pose': 'no localiser pose near the scan in time',
@@ -95,7 +101,8 @@ def untrusted(stamp, pose, last_jump, witness, place, params,
     :mod:`.pose_label` (its sd the larger of the poses it comes from;
     None: no pose labels it); ``last_jump``: the stamp of its newest jump
     (None: none); ``witness``: the WiFi witness's state (None: not heard
-    yet); ``place``: the current (building, floor) or None; ``confirmed``:
+    yet; :data:`GONE`: stopped); ``place``: the current (building,
+    floor) or None; ``confirmed``:
     whether the witness agreed with the localiser, ``settle_s`` or more
     after its last jump, before the scan. The reason is a key of
     :data:`REASONS`.
@@ -103,8 +110,8 @@ def untrusted(stamp, pose, last_jump, witness, place, params,
     if place is None:
         return 'no_place'
     if witness not in (AGREES, CANNOT_TELL):
-        return {LOST: 'lost', DISAGREES: 'disagrees'}.get(
-            witness, 'witness_waiting')
+        return {LOST: 'lost', DISAGREES: 'disagrees',
+                GONE: 'witness_gone'}.get(witness, 'witness_waiting')
     if pose is None or abs(pose.stamp - stamp) > params.max_pose_age:
         return 'no_pose'
     if not pose.sd <= params.max_sd:

@@ -17,8 +17,9 @@ pose (x, y, yaw, frame) and classifier_node's current building and floor,
 but only while the localiser is trusted: its pose sure (max_sd), no jump
 in the last settle_s seconds, and localization_monitor saying neither
 lost nor disagrees (cannot_tell does not stop it: inside a survey hole
-WiFi cannot testify; but after a jump, nothing until it says agrees).
-Every scan left out is counted by reason.
+WiFi cannot testify; but after a jump, nothing until it says agrees)
+and still running (its latched state does not outlive its publisher,
+nor does the current place). Every scan left out is counted by reason.
 """
 
 #: (role, name, type, what) of every topic the node uses; {name} is the

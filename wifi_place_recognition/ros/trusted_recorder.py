@@ -11,7 +11,10 @@ interpolated between the poses around it, else the nearest, within
 :class:`.core.trusted.TrustGate` finds no reason against it (the
 localiser sure of its pose and not jumping, the witness saying neither
 lost nor disagrees; ``cannot_tell`` does not stop it, except after a
-jump: then nothing until the witness agrees). A scan is held, with the
+jump: then nothing until the witness agrees). Both latched inputs count
+only while their publisher lives: once the witness's is gone (the
+monitor stopped or died), its last state is :data:`.core.trusted.GONE`;
+once the current place's is, there is no place. A scan is held, with the
 witness's state and the place when it arrived, until a pose at or after its stamp
 arrives or a stamp more than ``max_pose_age`` past it; those held at
 shutdown are judged and labelled with the poses there are. The file is
@@ -33,13 +36,15 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from ..core.trusted import LocaliserPose, REASONS, TrustGate, TrustParams
+from ..core.trusted import (GONE, LocaliserPose, REASONS, TrustGate,
+                            TrustParams)
 from ..data.recording import FingerprintLog, frame_problem, RecordingError
 from .kept_files import KeptFiles
 from .messages import (key_value as _kv, pose_problem, seconds, stamp_time,
@@ -88,10 +93,14 @@ class TrustedRecorder(Node):
                 PoseWithCovarianceStamped, values['localizer_topic'],
                 self._on_pose, POSE_QOS, qos_overriding_options=(
                     QoSOverridingOptions(policy_kinds=QOS_OVERRIDES))),
-            self.create_subscription(String, values['status_topic'],
-                                     self._on_status, LATCHED),
-            self.create_subscription(DiagnosticArray, values['place_topic'],
-                                     self._on_place, LATCHED)]
+            self.create_subscription(
+                String, values['status_topic'], self._on_status, LATCHED,
+                event_callbacks=SubscriptionEventCallbacks(
+                    matched=self._on_witness_matched)),
+            self.create_subscription(
+                DiagnosticArray, values['place_topic'], self._on_place,
+                LATCHED, event_callbacks=SubscriptionEventCallbacks(
+                    matched=self._on_place_matched))]
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
         self._scan_sub = self.create_subscription(
@@ -148,6 +157,22 @@ class TrustedRecorder(Node):
 
     def _on_status(self, msg):
         self.gate.witness = msg.data
+
+    def _on_witness_matched(self, info):
+        """Mark the witness gone once its publisher is: its state is stale."""
+        if info.current_count == 0 and self.gate.witness is not None:
+            self.gate.witness = GONE
+            self.get_logger().warn(
+                f'{self.subs[1].topic_name} has no publisher any more (the '
+                f'witness stopped): not recording until it is back')
+
+    def _on_place_matched(self, info):
+        """Forget the current place once its publisher is gone."""
+        if info.current_count == 0 and self.gate.place is not None:
+            self.gate.place = None
+            self.get_logger().warn(
+                f'{self.subs[2].topic_name} has no publisher any more: no '
+                f'current place, not recording until it is back')
 
     def _on_place(self, msg):
         for status in msg.status:
