@@ -110,6 +110,10 @@ class Recorder:
         wait_until(lambda: False, 0.05, self.ros)
 
     def close(self):
+        """Stop the recorder and the test's side: no latched state left."""
+        for pub in (self.local, self.status, self.place, self.scans):
+            self.ros.destroy_publisher(pub)
+        self.ros.destroy_subscription(self.sub)
         code, log = self.proc.stop()
         assert code == 0 and 'Traceback' not in log, log
         return log
