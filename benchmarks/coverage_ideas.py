@@ -30,6 +30,16 @@ seeds ``--seeds`` (default 0), the fitted odometry.
   their heading is known: the particles' unweighted share, and the
   restart rule reads the previous scan's trust, as the sensor interface
   is called); and told which scans lie in holes (the upper bound).
+- **The heading at a start** (the filter starts from a scan with every
+  heading, and where the robot drives slowly past poor scans it settles
+  on a wrong one): told the true heading whenever it starts (the upper
+  bound: the particles' headings set to AMCL's, 0.1 rad spread), and
+  the survey's corridor as a heading prior (``AxisPriorFusion``: while
+  the particles' heading is not known and the robot drives, a particle
+  whose direction of travel lies across the principal axis of the
+  survey positions within ``AXIS_RADIUS_M`` of the scan's answer is
+  weighed down, in proportion to how line-like they lie); and told
+  both the heading at a start and the holes.
 
 Table on stdout, JSON in ``benchmarks/results/coverage-ideas.json``.
 
@@ -40,6 +50,7 @@ import argparse
 from dataclasses import replace
 from itertools import permutations
 import json
+import math
 from pathlib import Path
 import sys
 import tempfile
@@ -49,7 +60,8 @@ from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.coverage import (
     COVERED_M, EDGE_RADIUS_M, one_sidedness, PAIRS_PER_STEP)
-from wifi_place_recognition.core.filter.fusion import Fusion
+from wifi_place_recognition.core.filter.angles import wrap
+from wifi_place_recognition.core.filter.fusion import Fusion, relative
 from wifi_place_recognition.core.filter.sensor import WifiSensorModel
 from wifi_place_recognition.core.filter.trajectory import fuse_offline, score
 from wifi_place_recognition.training.coverage import auc
@@ -60,6 +72,13 @@ import fusion as fb  # noqa: E402  (the fusion benchmark's protocol)
 #: The mean resultant length of the particles' headings from which the
 #: heading counts as known (BeliefSensor).
 HEADING_KNOWN = 0.9
+#: The heading prior: survey positions within this radius of the answer
+#: (m), the least number of them, the robot's least travel over the last
+#: 2 s (m), the prior's sharpness and its largest share (at a line).
+AXIS_RADIUS_M, AXIS_MIN_REFS, AXIS_MOVED_M = 4.0, 5, 0.3
+AXIS_KAPPA, AXIS_SHARE = 4.0, 0.8
+#: Spread (rad) of the true heading a told start is given.
+TOLD_HEADING_SD = 0.1
 
 
 def nearest_covered(xy, survey_xy, reach=COVERED_M):
@@ -127,24 +146,90 @@ class BeliefSensor(SurveySensor):
             np.exp(-d2 / (2 * width ** 2)) + floor
 
 
+class HeadingToldFusion(Fusion):
+    """The filter told the true heading whenever it starts afresh."""
+
+    def __init__(self, params, seed, stamps, yaw):
+        super().__init__(params, seed=seed)
+        self.truth = stamps, yaw
+
+    def _apply(self, scan, odometry):
+        pose = super()._apply(scan, odometry)
+        if pose is not None and pose.restarted:
+            stamps, yaw = self.truth
+            i = min(np.searchsorted(stamps, scan[0]), len(stamps) - 1)
+            state = self.filter.state
+            state[:, 2] = wrap(yaw[i] + TOLD_HEADING_SD *
+                               self.filter.rng.standard_normal(len(state)))
+        return pose
+
+
+class AxisPriorFusion(Fusion):
+    """The survey's corridor direction as a prior on an unknown heading."""
+
+    def __init__(self, params, seed, survey_xy):
+        super().__init__(params, seed=seed)
+        self.survey = survey_xy
+
+    def axis(self, xy):
+        """Return (direction, line-likeness) of the survey near ``xy``."""
+        near = self.survey[np.hypot(*(self.survey - xy).T) <= AXIS_RADIUS_M]
+        if len(near) < AXIS_MIN_REFS:
+            return None
+        low, high = np.linalg.eigh(np.cov(near.T))
+        if low[1] <= 0:
+            return None
+        return math.atan2(high[1, 1], high[0, 1]), 1 - low[0] / low[1]
+
+    def _apply(self, scan, odometry):
+        f = self.filter
+        if odometry and f.started and len(self.odom) > 1:
+            step = relative(self._odometry_at(scan[0] - 2.0)[1:],
+                            self._odometry_at(scan[0])[1:])
+            axis = self.axis(scan[1])
+            known = abs(f.weight @ np.exp(1j * f.state[:, 2]))
+            if math.hypot(*step[:2]) >= AXIS_MOVED_M and axis and \
+                    known < HEADING_KNOWN:
+                across = f.state[:, 2] + math.atan2(step[1], step[0]) - \
+                    axis[0]
+                share = AXIS_SHARE * axis[1]
+                f.weight = f.weight * (1 - share + share * np.exp(
+                    AXIS_KAPPA * (np.cos(2 * across) - 1)))
+                f.weight /= f.weight.sum()
+        return super()._apply(scan, odometry)
+
+
 def survey_positions(model):
     """Return every reference position of a model (m, map frame)."""
     return np.concatenate([model.position.map_xy(c)
                            for c in range(len(model.classes))])
 
 
-def filters(fitted, single, side, hole, survey_xy):
-    """Return {name: (params, scans' coverage, sensor factory)}."""
+def filters(fitted, single, side, hole, survey_xy, test):
+    """Return {name: (params, scans' coverage, fusion factory)}."""
     weighed = replace(fitted.fusion, coverage_full=0.5)
+
+    def sensor(kind):
+        return lambda p, seed: Fusion(p, seed=seed,
+                                      sensor=kind(p, survey_xy))
     return {
         'default': (fitted.fusion, single[2], None),
         'weighed by one-sidedness': (weighed, 1 - np.nan_to_num(side, nan=1),
                                      None),
-        'edge sensor': (fitted.fusion, single[2],
-                        lambda p: EdgeSensor(p, survey_xy)),
-        'belief sensor': (fitted.fusion, single[2],
-                          lambda p: BeliefSensor(p, survey_xy)),
-        'told the holes': (weighed, np.where(hole, 0.0, 1.0), None)}
+        'edge sensor': (fitted.fusion, single[2], sensor(EdgeSensor)),
+        'belief sensor': (fitted.fusion, single[2], sensor(BeliefSensor)),
+        'told the holes': (weighed, np.where(hole, 0.0, 1.0), None),
+        'survey axis as heading prior': (
+            fitted.fusion, single[2],
+            lambda p, seed: AxisPriorFusion(p, seed, survey_xy)),
+        'told the heading at a start': (
+            fitted.fusion, single[2],
+            lambda p, seed: HeadingToldFusion(p, seed, test.stamps,
+                                              test.yaw)),
+        'told both': (
+            weighed, np.where(hole, 0.0, 1.0),
+            lambda p, seed: HeadingToldFusion(p, seed, test.stamps,
+                                              test.yaw))}
 
 
 def pair(trained, test, seeds):
@@ -165,19 +250,21 @@ def pair(trained, test, seeds):
            else None}
     alone = fb.single_figures(test, single, hole)['mean_m']
     out['filters'] = {}
-    for name, (params, coverage, sensor) in filters(
-            fitted, single, side, hole, survey_xy).items():
+    for name, (params, coverage, fusion) in filters(
+            fitted, single, side, hole, survey_xy, test).items():
         runs = []
         for seed in seeds:
             xy, yaw, cov = fuse_offline(
                 test.odometry, (test.stamps, single[0], single[1], coverage),
-                Fusion(params, seed=seed,
-                       sensor=sensor(params) if sensor else None))
+                fusion(params, seed) if fusion else
+                Fusion(params, seed=seed))
             s = score(test.stamps, test.xy, xy, test.yaw, yaw, cov,
                       settle_s=fb.SETTLE_S)
             runs.append({'ratio': s['mean_m'] / alone, 'p95_m': s['p95_m'],
                          'max_after_settle_m': s['max_after_settle_m'],
-                         'in_95_ellipse': s['in_95_ellipse']})
+                         'in_95_ellipse': s['in_95_ellipse'],
+                         'yaw_median_deg': s[
+                             'yaw_median_deg_after_settle']})
         out['filters'][name] = runs
     return out
 
@@ -195,19 +282,30 @@ def line(name, figures):
 
 
 def summary(results):
-    """Return the filters' mean ratio, worst ratio, p95, max after 60 s."""
-    out = {}
-    for name in next(iter(results.values()))['filters']:
-        runs = [r for figures in results.values()
-                for r in figures['filters'][name]]
-        out[name] = {
+    """
+    Return each filter's figures over every pair and per building.
+
+    Mean and worst fused / single, the worst p95, largest error after 60
+    s and yaw median, the range of the 95 % ellipse.
+    """
+    def figures(runs):
+        return {
             'mean_ratio': float(np.mean([r['ratio'] for r in runs])),
             'worst_ratio': max(r['ratio'] for r in runs),
             'worst_p95_m': max(r['p95_m'] for r in runs),
             'worst_max_after_settle_m': max(r['max_after_settle_m']
                                             for r in runs),
             'ellipse': [min(r['in_95_ellipse'] for r in runs),
-                        max(r['in_95_ellipse'] for r in runs)]}
+                        max(r['in_95_ellipse'] for r in runs)],
+            'worst_yaw_median_deg': max(r['yaw_median_deg'] for r in runs)}
+    buildings = sorted({name.split('test')[0] for name in results})
+    out = {}
+    for name in next(iter(results.values()))['filters']:
+        out[name] = figures([r for f in results.values()
+                             for r in f['filters'][name]])
+        out[name]['by_building'] = {b: figures(
+            [r for pair, f in results.items() if pair.startswith(b)
+             for r in f['filters'][name]]) for b in buildings}
     return out
 
 
@@ -223,7 +321,7 @@ def main():
     seeds = [int(s) for s in args.seeds.split(',')]
     results = {}
     print(f'{"test <- survey":28s} hole  AUC: P  side  fused / single: '
-          f'default, weighed, edge, belief, told')
+          f'default, weighed, edge, belief, told, axis, heading, both')
     with tempfile.TemporaryDirectory() as folder:
         for site, runs in fb.site_runs(args.data, folder):
             for holes in (False, True):
@@ -235,10 +333,13 @@ def main():
                     print(line(name, results[name]), flush=True)
     total = summary(results)
     for name, s in total.items():
-        print(f'{name}: mean {s["mean_ratio"]:.3f}, worst '
-              f'{s["worst_ratio"]:.2f}, p95 up to {s["worst_p95_m"]:.1f} m, '
-              f'max after 60 s up to {s["worst_max_after_settle_m"]:.1f} m, '
-              f'ellipse {s["ellipse"][0]:.2f}-{s["ellipse"][1]:.2f}')
+        for where, f in (('all', s), *s['by_building'].items()):
+            print(f'{name} ({where}): mean {f["mean_ratio"]:.3f}, worst '
+                  f'{f["worst_ratio"]:.2f}, p95 up to {f["worst_p95_m"]:.1f} '
+                  f'm, max after 60 s up to '
+                  f'{f["worst_max_after_settle_m"]:.1f} m, ellipse '
+                  f'{f["ellipse"][0]:.2f}-{f["ellipse"][1]:.2f}, yaw median '
+                  f'up to {f["worst_yaw_median_deg"]:.1f} deg')
     with atomic_write(args.out, 'w') as f:
         json.dump({'protocol': __doc__.strip(), 'seeds': seeds,
                    'radius_m': EDGE_RADIUS_M, 'pairs': results,

@@ -229,6 +229,55 @@ def test_the_filter_finds_the_heading_and_follows_a_drifting_odometry():
     assert 0.8 <= figures['in_95_ellipse'] <= 1.0
 
 
+def test_a_set_pose_starts_the_filter_with_its_heading_carried_by_odometry():
+    """
+    A pose known otherwise (a dock's): heading included, at its stamp.
+
+    Set at 1.0 s while odometry runs to 2.0 s (the robot drove 0.5 m
+    along x): the filter starts there, carried by the motion since; a
+    scan still waiting from before a later one is dropped; bad values
+    are refused.
+    """
+    fusion = Fusion(seed=0)
+    truth, odo = straight(n=60)         # true heading 0, odometry's 0.3
+    for row in odo[:21]:                # to 2.0 s
+        fusion.odometry(*row)
+    fusion.set_pose(1.0, [0.5, 0.0], 0.0, 0.1, math.radians(2), PLACE)
+    assert fusion.counts['set_pose'] == 1
+    pose = fusion.pose()
+    assert np.allclose(pose.xy, [1.0, 0.0], atol=0.05), pose.xy
+    assert abs(pose.yaw) < math.radians(1) and pose.cov[2, 2] < 0.01
+    assert pose.place == PLACE
+    assert fusion.scan(2.05, [9.0, 9.0], PLACE) == []     # waits
+    fusion.set_pose(2.1, [1.05, 0.0], 0.0, 0.1, math.radians(2), PLACE)
+    assert fusion.counts['scans_before_set_pose'] == 1
+    assert fusion.pending == []
+    for name, args in (('stamp', (math.nan, [0, 0], 0, 0.1, 0.1)),
+                       ('yaw', (1.0, [0, 0], math.inf, 0.1, 0.1)),
+                       ('position', (1.0, [0, math.nan], 0, 0.1, 0.1)),
+                       ('sd', (1.0, [0, 0], 0, -1.0, 0.1)),
+                       ('yaw_sd', (1.0, [0, 0], 0, 0.1, math.nan))):
+        with pytest.raises(ValueError, match=name):
+            fusion.set_pose(*args, PLACE)
+    assert fusion.counts['set_pose'] == 2
+
+
+def test_a_set_pose_before_any_odometry_is_anchored_by_the_first_scan():
+    fusion = Fusion(seed=0)
+    fusion.set_pose(0.0, [3.0, 4.0], math.pi / 2, 0.2, 0.05, PLACE)
+    truth, odo = straight(n=40, yaw=0.0)    # drives 2 m ahead
+    released = []
+    for row in odo[:5]:
+        released += fusion.odometry(*row)[1]
+    released += fusion.scan(0.45, [3.0, 4.0], PLACE) or []
+    for row in odo[5:]:
+        released += fusion.odometry(*row)[1]
+    assert [p.restarted for p in released] == [False]
+    pose = fusion.pose()    # 2 m along the set heading (+y), not from x
+    assert np.allclose(pose.xy, [3.0, 5.75], atol=0.3), pose.xy
+    assert abs(wrap(pose.yaw - math.pi / 2)) < math.radians(3)
+
+
 def test_fusion_parameters_are_checked_and_kept_in_the_model_file(
         tmp_path, surveyed_model):
     with pytest.raises(ValueError, match='wifi_sd = 0'):

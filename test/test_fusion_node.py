@@ -7,7 +7,8 @@ every scan (stamped with it) with a yaw, better than the scans alone; a
 scan waits for the odometry that covers its stamp; between scans the pose
 follows the odometry; a lift (odometry still, the floor changes); a
 kidnapped robot; ``initialpose`` with the fused yaw; every odometry fault
-counted, none followed.
+counted, none followed; a pose set on ``~/set_pose`` gives the heading
+from the first scan, one in no place's frame is refused.
 """
 
 import math
@@ -20,7 +21,8 @@ from ros_helpers import RELIABLE, running_node
 from rclpy.qos import ReliabilityPolicy
 from std_srvs.srv import Trigger
 from test_place_changes import Building, ORIGIN
-from wifi_place_recognition.ros.messages import status_values, yaw_of
+from wifi_place_recognition.ros.messages import (pose_message,
+                                                 status_values, yaw_of)
 from wifi_place_recognition.ros.run_replayer import odometry_message
 
 FRAME = 'map_f{floor}'
@@ -351,3 +353,46 @@ def test_fusion_switched_on_while_running_gives_poses_between_scans(
         _, pose = drive.scan(ahead[0] + 2.0, 12, 8)
         assert wait_until(lambda: drive.initial, 10, ros), 'request lost'
         assert drive.initial[-1].header.stamp == pose.header.stamp
+
+
+def test_a_set_pose_gives_the_heading_from_the_first_scan(
+        ros, tmp_path, surveyed_model):
+    """
+    A dock's pose on ``~/set_pose``: no start with every heading.
+
+    Seen failing with the yaw dropped (every scan's yaw unknown at
+    first) and with the set pose ignored.
+    """
+    with running_node(ros, tmp_path, surveyed_model, 'set_node', '-p',
+                      f'frame_id:={FRAME}', *RELIABLE_ODOM) as (
+            client, proc, _):
+        drive = Drive(ros, client, 'set_node')
+        setter = ros.create_publisher(PoseWithCovarianceStamped,
+                                      '/set_node/set_pose', RELIABLE)
+        assert wait_until(setter.get_subscription_count, 10, ros)
+        truth = square(laps=0.2)            # 19 m along the first side
+        t, x, y, yaw = truth[0]
+        stamp = odometry_message(truth[0]).header.stamp
+
+        def dock(frame):
+            return pose_message(np.array([x, y]) + ORIGIN,
+                                np.diag([0.04, 0.04, math.radians(2) ** 2]),
+                                stamp, frame, yaw)
+        setter.publish(dock('elsewhere'))     # the frame of no place
+        assert wait_until(lambda: int(health(client)[
+            'set_pose_refused']) == 1, 10, ros), health(client)
+        setter.publish(dock('map_f0'))
+        assert wait_until(lambda: int(health(client)[
+            'fusion_set_pose']) == 1, 10, ros), health(client)
+        results = drive.drive(truth, odometry_of(truth))
+        fused, single, yaw_error = errors(results)
+        variance = [p.pose.covariance[35] for _, _, p in results]
+        # a start from a scan knows no heading for metres: this one does
+        # from the first scan (then the odometry's drift, 1 deg per m,
+        # widens it until the scans find the drift)
+        assert max(variance[:3]) < 0.01 and yaw_error[:3].max() < 5, \
+            (variance, yaw_error)
+        assert max(variance) < 1.0 and yaw_error.max() < 15, \
+            (variance, yaw_error)
+        assert fused.mean() < single.mean(), (fused, single)
+        assert int(health(client)['fusion_restarts']) == 0

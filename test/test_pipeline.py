@@ -182,3 +182,24 @@ def test_the_offline_path_gives_the_nodes_fused_poses():
     np.testing.assert_array_equal(offline[0], node)
     np.testing.assert_array_equal(offline[1], yaw)
     np.testing.assert_array_equal(offline[2], cov)
+
+
+def test_a_set_pose_names_its_place_by_its_frame_or_is_refused():
+    """One place per frame, or the current one of a frame for several."""
+    pipeline = ScanPipeline(fusion=Fusion(seed=0))
+    xy = np.array([1.0, 2.0])
+    assert 'no place' in pipeline.set_pose(0.0, xy, 0.0, 0.1, 0.1, [])
+    # one frame for every floor: only once the current place is known
+    both = [(0, 0), (0, 1)]
+    assert 'several places' in pipeline.set_pose(0.0, xy, 0.0, 0.1, 0.1,
+                                                 both)
+    pipeline.answer(position_answer([5.0, 5.0], 2.0, (0, 1)), 1.0, 1.0)
+    assert pipeline.set_pose(1.5, xy, 0.0, 0.1, 0.1, both) is None
+    fusion = pipeline.fusion.fusion
+    assert fusion.place == (0, 1) and fusion.counts['set_pose'] == 1
+    assert 'yaw_sd' in pipeline.set_pose(2.0, xy, 0.0, 0.1, -1.0, both)
+    pipeline.configure(fusion=False)
+    assert pipeline.set_pose(2.0, xy, 0.0, 0.1, 0.1, both) == \
+        'fusion is off'
+    assert 'no position output' in ScanPipeline().set_pose(
+        2.0, xy, 0.0, 0.1, 0.1, both)

@@ -9,7 +9,11 @@ latched ``~/current_place``. With a model that has a position output, also
 a ``geometry_msgs/PoseWithCovarianceStamped`` on ``~/pose`` per answer;
 ``initialpose`` gets the next confident one after a ``~/publish_initial_pose``
 request and, with ``initial_pose_on_change``, every confident one that
-changes the building/floor or whose position jumps. While odometry
+changes the building/floor or whose position jumps. ``~/set_pose``
+(``PoseWithCovarianceStamped``, robot_localization's ``set_pose``) starts
+the fused pose at a pose known otherwise (a dock, an operator's estimate),
+heading included; one that cannot be used is refused, logged and
+counted (``set_pose_refused``). While odometry
 arrives on ``odom`` (``fusion``), ``~/pose`` is the pose fused with it,
 with a yaw, at every scan and in between (:mod:`.odometry_fusion`), and
 ``initialpose`` carries it: after a change of floor, the filter's first
@@ -53,8 +57,8 @@ from ..core.resources import default_model_path
 from ..core.scan import REJECT_REASONS
 from .classifier_parameters import (check_frame, declare, no_position,
                                     RECOGNIZER_SETTINGS, refusal)
-from .messages import (key_value as _kv, pose_message, stamp_time,
-                       yaw_text)
+from .messages import (key_value as _kv, pose_message, pose_problem,
+                       stamp_time, UNKNOWN_VARIANCE, yaw_of, yaw_text)
 from .odometry_fusion import OdometryFusion
 from .place_changes import CurrentPlace
 from .runner import names_the_node, run
@@ -101,6 +105,7 @@ class ClassifierNode(Node):
         super().__init__('classifier_node', **kwargs)
         values = declare(self)
         self.odometry = None    # OdometryFusion, with a position model
+        self.set_pose_refused = 0
         self._make_forward = make_forward
         self._candidate = None  # (path, model) validated, to swap to
         self.model_path = values['model_path'] or str(default_model_path())
@@ -144,6 +149,9 @@ class ClassifierNode(Node):
                                 self._on_publish_initial_pose)
             self.odometry = OdometryFusion(self, self.pipeline,
                                            self._publish)
+            self.create_subscription(
+                PoseWithCovarianceStamped, '~/set_pose', self._on_set_pose,
+                QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self.get_logger().info(self._described(model))
 
     def _forward(self, model):
@@ -225,6 +233,38 @@ class ClassifierNode(Node):
         response.success = True
         self.get_logger().info(response.message)
         return response
+
+    def _on_set_pose(self, msg):
+        pose, cov, frame = msg.pose.pose, msg.pose.covariance, \
+            msg.header.frame_id
+        variances = (cov[0], cov[7], cov[35])
+        problem = pose_problem(pose)
+        if problem is None and not all(math.isfinite(v) and v >= 0
+                                       for v in variances):
+            problem = (f'x, y, yaw variances {variances[0]}, '
+                       f'{variances[1]}, {variances[2]}: expected finite '
+                       f'and >= 0')
+        if problem is None:
+            places = [(int(b), int(f)) for b, f in
+                      self.pipeline.recognizer.model.classes
+                      if self._frame((b, f)) == frame]
+            known = variances[2] < UNKNOWN_VARIANCE
+            problem = self.pipeline.set_pose(
+                stamp_time(msg.header.stamp, self.get_clock()),
+                (pose.position.x, pose.position.y),
+                yaw_of(pose.orientation) if known else None,
+                math.sqrt(max(variances[:2])), math.sqrt(variances[2])
+                if known else 0.0, places)
+        p = pose.position
+        what = f'x {p.x:g}, y {p.y:g} in frame {frame!r}'
+        if problem:
+            self.set_pose_refused += 1
+            self.get_logger().warn(f'set_pose refused ({what}): {problem}',
+                                   throttle_duration_sec=THROTTLE_S)
+            return
+        self.get_logger().info(
+            f'fused pose set to {what} (sd {math.sqrt(max(variances[:2])):.2f}'
+            f' m), {yaw_text(msg)}')
 
     # scans ----------------------------------------------------------------
     def _on_scan(self, msg, info):
@@ -344,6 +384,7 @@ class ClassifierNode(Node):
         if fusion is not None:
             problem, fusion_counts = fusion.health(time.monotonic())
             values += [_kv(k, v) for k, v in fusion_counts.items()]
+            values.append(_kv('set_pose_refused', self.set_pose_refused))
             values.append(_kv('fusion', 'on' if fusion.active else
                               'off' if not fusion.enabled else
                               'waiting for odometry'))

@@ -41,6 +41,10 @@ TOPICS = (
     ('subscribes', 'odom', Odometry,
      'the robot\'s odometry (pose in its odom frame); while it flows, each '
      'answer\'s position is fused with it (fusion); sensor-data QoS'),
+    ('subscribes', '~/set_pose', PoseWithCovarianceStamped,
+     'a model with positions: a known start (a dock, an operator\'s '
+     'estimate) in the frame of a place; the fused pose starts there, '
+     'heading included; reliable'),
     ('publishes', '~/pose', PoseWithCovarianceStamped,
      'a model with positions: the position of each answer, in frame_id; '
      'with odometry, the fused pose with yaw, at every scan and '

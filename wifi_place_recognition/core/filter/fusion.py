@@ -21,7 +21,9 @@ motion). A scan that waited ``odom_timeout`` seconds (on the clock of its
 ``arrival``) without odometry covering it is applied alone: the particles
 spread by ``idle_speed`` and ``idle_turn_rate`` per second since the last
 scan, or start afresh at the scan when that spread exceeds a start's.
-Two confident scans in a row of another building/floor restart the filter
+:meth:`Fusion.set_pose` starts the filter at a pose known otherwise (a
+dock's, an operator's), heading included, which a start from a scan
+lacks. Two confident scans in a row of another building/floor restart the filter
 there (a lift); a scan of another place is otherwise not applied, and
 gets the current pose. Each scan is weighed as far as it is trusted: its
 misfit to odometry over the last seconds (:class:`.track_misfit.TrackMisfit`)
@@ -131,6 +133,47 @@ class Fusion:
         self.last_scan = None   # stamp of the last scan applied
         self.filter.state = None
         self.misfit.clear()     # the recent scans' track
+
+    def set_pose(self, stamp, xy, yaw, sd, yaw_sd, place):
+        """
+        Start the filter at a known pose (a dock's, an operator's).
+
+        ``xy`` (m, map frame) and ``yaw`` (rad) at ``stamp`` on ``place``
+        (building, floor), spread by ``sd`` (m) and ``yaw_sd`` (rad);
+        ``yaw`` None: not known (every heading, as a start from a scan).
+        Where odometry covers the stamp, a pose with a yaw is carried to
+        the newest odometry by the motion since; before any odometry, the
+        next scan's odometry pose anchors it. Scans waiting from before
+        ``stamp`` are dropped (counted: ``scans_before_set_pose``).
+        ValueError (naming the value) on a non-finite pose or stamp, or a
+        spread not finite and >= 0.
+        """
+        xy = np.asarray(xy, np.float64)
+        for name, value in (('stamp', stamp), ('yaw', yaw)):
+            if value is not None and not math.isfinite(value):
+                raise ValueError(f'set_pose: {name} {value!r} is not finite')
+        if xy.shape != (2,) or not np.isfinite(xy).all():
+            raise ValueError(f'set_pose: position {xy.tolist()!r}: expected '
+                             f'two finite numbers')
+        for name, value in (('sd', sd), ('yaw_sd', yaw_sd)):
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f'set_pose: {name} {value!r}: expected a '
+                                 f'finite number >= 0')
+        kept = [item for item in self.pending if item[0] >= stamp]
+        self.counts['scans_before_set_pose'] += len(self.pending) - len(kept)
+        self.pending = kept
+        self.anchor = None
+        if self.odom:
+            if yaw is not None:
+                xy, yaw = compose(xy, yaw, relative(
+                    self._odometry_at(stamp)[1:], self.odom[-1][1:]))
+            self.anchor = self.odom[-1]
+        self.filter.start(xy, yaw, sd, yaw_sd)
+        self.place = place
+        self.switch.reset()
+        self.misfit.clear()
+        self.last_scan = stamp
+        self.counts['set_pose'] += 1
 
     @property
     def odometry_stamp(self):

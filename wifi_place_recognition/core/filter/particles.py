@@ -130,19 +130,26 @@ class ParticleFilter:
         """Return True once a scan started the filter."""
         return self.state is not None
 
-    def start(self, xy):
-        """Spread particles around a scan's position, every heading."""
+    def start(self, xy, yaw=None, sd=None, yaw_sd=0.0):
+        """
+        Spread particles around a position: every heading, or ``yaw``'s.
+
+        ``sd`` (m): the position's spread (default ``start_sd``, a scan's);
+        with ``yaw`` (rad), the headings spread ``yaw_sd`` (rad) around it.
+        """
         n = int(self.params.particles)
-        self.state = self._fresh(n, xy)
+        self.state = self._fresh(n, xy, yaw, sd, yaw_sd)
         self.weight = np.full(n, 1.0 / n)
         self.disagreeing = 0
 
-    def _fresh(self, n, xy):
-        """Return ``n`` particles around ``xy``, every heading, drift prior."""
+    def _fresh(self, n, xy, yaw=None, sd=None, yaw_sd=0.0):
+        """Return ``n`` particles around ``xy`` (see :meth:`start`)."""
         p = self.params
         state = np.empty((n, 4))
-        state[:, :2] = xy + p.start_sd * self.rng.standard_normal((n, 2))
-        state[:, 2] = self.rng.uniform(-math.pi, math.pi, n)
+        sd = p.start_sd if sd is None else sd
+        state[:, :2] = xy + sd * self.rng.standard_normal((n, 2))
+        state[:, 2] = self.rng.uniform(-math.pi, math.pi, n) if yaw is None \
+            else wrap(yaw + yaw_sd * self.rng.standard_normal(n))
         state[:, 3] = p.drift_mean + p.drift_sd * self.rng.standard_normal(n)
         return state
 

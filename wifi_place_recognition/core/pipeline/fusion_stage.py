@@ -32,7 +32,9 @@ HEALTH_NAMES = {'odometry': 'odometry_received',
                 'scans_late': 'fusion_scans_late',
                 'scans_off_track': 'fusion_scans_off_track',
                 'scans_without_position': 'fusion_scans_without_position',
-                'restarts': 'fusion_restarts'}
+                'restarts': 'fusion_restarts',
+                'set_pose': 'fusion_set_pose',
+                'scans_before_set_pose': 'fusion_scans_before_set_pose'}
 #: Scans kept waiting for odometry at most (more: the oldest forgotten).
 MAX_WAITING = 100
 _NONE = object()
@@ -80,6 +82,11 @@ class FusionStage:
         self.fusion.reset()
         self._sources.clear()
         self._place = None
+
+    def set_pose(self, stamp, xy, yaw, sd, yaw_sd, place):
+        """Start the filter at a known pose (:meth:`.Fusion.set_pose`)."""
+        self.fusion.set_pose(stamp, xy, yaw, sd, yaw_sd, place)
+        self._place = place
 
     def scan(self, answer, place, confident, stamp, source, now, problems):
         """Feed one answer (:class:`.recognizer.Place`) at ``stamp`` (s)."""
@@ -185,7 +192,7 @@ class FusionStage:
                   ('odometry', 'odometry_same_stamp') + ODOMETRY_FAULTS +
                   ('scans_fused', 'scans_alone', 'scans_other_place',
                    'scans_late', 'scans_off_track', 'scans_without_position',
-                   'restarts')}
+                   'restarts', 'set_pose', 'scans_before_set_pose')}
         values['fusion_internal_errors'] = self.counts_internal
         what, when = self._last_problem
         silent = now - self._odometry_arrival

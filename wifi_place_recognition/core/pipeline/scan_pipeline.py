@@ -113,6 +113,32 @@ class ScanPipeline:
         """Send the next confident answer's pose on initialpose."""
         self._requested = True
 
+    def set_pose(self, stamp, xy, yaw, sd, yaw_sd, places):
+        """
+        Start the fused pose at a known pose; return why not, or None.
+
+        ``places``: the (building, floor) the pose's frame can name: one,
+        or several (one frame for every floor) of which the current place
+        must be one. A refusal names what is wrong; the pose is not used.
+        """
+        if self.fusion is None:
+            return 'the model has no position output: nothing to fuse'
+        if not self.fusion.enabled:
+            return 'fusion is off'
+        places = list(places)
+        if not places:
+            return 'its frame is that of no place of the model'
+        if len(places) > 1:
+            if self.changes.place not in places:
+                return ('its frame is that of several places, and none is '
+                        'the current place yet')
+            places = [self.changes.place]
+        try:
+            self.fusion.set_pose(stamp, xy, yaw, sd, yaw_sd, places[0])
+        except ValueError as exc:
+            return str(exc)
+        return None
+
     def reset(self):
         """Forget the tracked belief and the fused pose; return what was."""
         cleared = []
