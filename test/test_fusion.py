@@ -20,7 +20,8 @@ from wifi_place_recognition.core.filter.angles import wrap
 from wifi_place_recognition.core.filter.fusion import Fusion, FusionLimits
 from wifi_place_recognition.core.filter.odometry_fit import (FitError,
                                                              fit_odometry)
-from wifi_place_recognition.core.filter.particles import FusionParams
+from wifi_place_recognition.core.filter.particles import (
+    FusionParams, UNKNOWN_VARIANCE)
 from wifi_place_recognition.core.filter.trajectory import (
     dead_reckoning, fuse_offline, odometry_alone, score)
 from wifi_place_recognition.data.files import DataError
@@ -260,6 +261,11 @@ def test_a_set_pose_starts_the_filter_with_its_heading_carried_by_odometry():
         with pytest.raises(ValueError, match=name):
             fusion.set_pose(*args, PLACE)
     assert fusion.counts['set_pose'] == 2
+    # a heading not known: every heading, round the set position
+    fusion.set_pose(2.1, [5.0, 5.0], None, 0.1, 0.0, PLACE)
+    estimate = fusion.filter.estimate()
+    assert np.allclose(estimate.xy, [5.0, 5.0], atol=0.05)
+    assert estimate.cov[2, 2] == UNKNOWN_VARIANCE
 
 
 def test_a_set_pose_before_any_odometry_is_anchored_by_the_first_scan():
