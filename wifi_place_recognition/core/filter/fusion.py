@@ -23,9 +23,9 @@ spread by ``idle_speed`` and ``idle_turn_rate`` per second since the last
 scan, or start afresh at the scan when that spread exceeds a start's.
 :meth:`Fusion.set_pose` starts the filter at a pose known otherwise (a
 dock's, an operator's), heading included, which a start from a scan
-lacks. Two confident scans in a row of another building/floor restart the filter
-there (a lift); a scan of another place is otherwise not applied, and
-gets the current pose. Each scan is weighed as far as it is trusted: its
+lacks. Two confident scans in a row of another building/floor restart
+the filter there (a lift); a scan of another place is otherwise not
+applied, and gets the current pose. Each scan is weighed as far as it is trusted: its
 misfit to odometry over the last seconds (:class:`.track_misfit.TrackMisfit`)
 widens it; the scans it widened are counted (``scans_off_track``).
 Between scans the particles move up to ``move_lag`` behind the newest

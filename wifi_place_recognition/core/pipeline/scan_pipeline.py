@@ -137,6 +137,8 @@ class ScanPipeline:
             self.fusion.set_pose(stamp, xy, yaw, sd, yaw_sd, places[0])
         except ValueError as exc:
             return str(exc)
+        except Exception as exc:  # never let the filter stop the caller
+            return f'internal error: {exc!r}'
         return None
 
     def reset(self):
