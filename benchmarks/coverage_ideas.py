@@ -183,13 +183,13 @@ class AxisPriorFusion(Fusion):
 
     def _apply(self, scan, odometry):
         f = self.filter
-        if odometry and f.started and len(self.odom) > 1:
+        if odometry and f.started and len(self.odom) > 1 and \
+                abs(f.weight @ np.exp(1j * f.state[:, 2])) < HEADING_KNOWN:
             step = relative(self._odometry_at(scan[0] - 2.0)[1:],
                             self._odometry_at(scan[0])[1:])
-            axis = self.axis(scan[1])
-            known = abs(f.weight @ np.exp(1j * f.state[:, 2]))
-            if math.hypot(*step[:2]) >= AXIS_MOVED_M and axis and \
-                    known < HEADING_KNOWN:
+            axis = self.axis(scan[1]) if \
+                math.hypot(*step[:2]) >= AXIS_MOVED_M else None
+            if axis:
                 across = f.state[:, 2] + math.atan2(step[1], step[0]) - \
                     axis[0]
                 share = AXIS_SHARE * axis[1]

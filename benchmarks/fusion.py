@@ -237,11 +237,12 @@ def fused_figures(test, single, params, hole, seeds=SEEDS, start=False):
     ``start``: the filter set at the test run's first true pose.
     """
     runs, first = [], None
-    at = np.flatnonzero(np.isfinite(test.xy).all(axis=1))[0]
+    if start:
+        at = np.flatnonzero(np.isfinite(test.xy).all(axis=1))[0]
+        start = (test.stamps[at], test.xy[at], test.yaw[at])
     for seed in seeds:
-        xy, yaw, cov = localise(
-            params, test.odometry, test.stamps, single, seed,
-            (test.stamps[at], test.xy[at], test.yaw[at]) if start else None)
+        xy, yaw, cov = localise(params, test.odometry, test.stamps, single,
+                                seed, start or None)
         s = score(test.stamps, test.xy, xy, test.yaw, yaw, cov,
                   settle_s=SETTLE_S)
         error = np.linalg.norm(xy - test.xy, axis=1)

@@ -238,6 +238,8 @@ class ClassifierNode(Node):
         pose, cov, frame = msg.pose.pose, msg.pose.covariance, \
             msg.header.frame_id
         variances = (cov[0], cov[7], cov[35])
+        sd = math.sqrt(max(variances[:2])) if min(variances[:2]) >= 0 \
+            else math.nan
         problem = pose_problem(pose)
         if problem is None and not all(math.isfinite(v) and v >= 0
                                        for v in variances):
@@ -252,9 +254,8 @@ class ClassifierNode(Node):
             problem = self.pipeline.set_pose(
                 stamp_time(msg.header.stamp, self.get_clock()),
                 (pose.position.x, pose.position.y),
-                yaw_of(pose.orientation) if known else None,
-                math.sqrt(max(variances[:2])), math.sqrt(variances[2])
-                if known else 0.0, places)
+                yaw_of(pose.orientation) if known else None, sd,
+                math.sqrt(variances[2]) if known else 0.0, places)
         p = pose.position
         what = f'x {p.x:g}, y {p.y:g} in frame {frame!r}'
         if problem:
@@ -263,8 +264,7 @@ class ClassifierNode(Node):
                                    throttle_duration_sec=THROTTLE_S)
             return
         self.get_logger().info(
-            f'fused pose set to {what} (sd {math.sqrt(max(variances[:2])):.2f}'
-            f' m), {yaw_text(msg)}')
+            f'fused pose set to {what} (sd {sd:.2f} m), {yaw_text(msg)}')
 
     # scans ----------------------------------------------------------------
     def _on_scan(self, msg, info):

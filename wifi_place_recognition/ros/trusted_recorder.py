@@ -29,6 +29,7 @@ usable frame or a negative or NaN variance is counted and left out.
 
 from collections import Counter
 from dataclasses import replace
+from functools import partial
 import math
 from pathlib import Path
 import sys
@@ -57,6 +58,10 @@ from .sequence import PublisherGaps
 from .trusted_parameters import PARAMETERS, TRUST_FIELDS
 
 THROTTLE_S = 10.0
+#: The latched inputs forgotten once their publisher is gone: their
+#: subscription (index of ``subs``), the value they take, what it means.
+GONE_INPUTS = {'witness': (1, GONE, 'the witness stopped'),
+               'place': (2, None, 'no current place')}
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
@@ -96,11 +101,11 @@ class TrustedRecorder(Node):
             self.create_subscription(
                 String, values['status_topic'], self._on_status, LATCHED,
                 event_callbacks=SubscriptionEventCallbacks(
-                    matched=self._on_witness_matched)),
+                    matched=partial(self._on_matched, 'witness'))),
             self.create_subscription(
                 DiagnosticArray, values['place_topic'], self._on_place,
                 LATCHED, event_callbacks=SubscriptionEventCallbacks(
-                    matched=self._on_place_matched))]
+                    matched=partial(self._on_matched, 'place')))]
         self.diag_pub = self.create_publisher(DiagnosticArray,
                                               '/diagnostics', 10)
         self._scan_sub = self.create_subscription(
@@ -158,21 +163,19 @@ class TrustedRecorder(Node):
     def _on_status(self, msg):
         self.gate.witness = msg.data
 
-    def _on_witness_matched(self, info):
-        """Mark the witness gone once its publisher is: its state is stale."""
-        if info.current_count == 0 and self.gate.witness is not None:
-            self.gate.witness = GONE
-            self.get_logger().warn(
-                f'{self.subs[1].topic_name} has no publisher any more (the '
-                f'witness stopped): not recording until it is back')
+    def _on_matched(self, what, info):
+        """
+        Forget a latched input (``what``) once its publisher is gone.
 
-    def _on_place_matched(self, info):
-        """Forget the current place once its publisher is gone."""
-        if info.current_count == 0 and self.gate.place is not None:
-            self.gate.place = None
-            self.get_logger().warn(
-                f'{self.subs[2].topic_name} has no publisher any more: no '
-                f'current place, not recording until it is back')
+        The witness's state becomes GONE, the current place None.
+        """
+        if info.current_count or getattr(self.gate, what) is None:
+            return
+        sub, value, meaning = GONE_INPUTS[what]
+        setattr(self.gate, what, value)
+        self.get_logger().warn(
+            f'{self.subs[sub].topic_name} has no publisher any more '
+            f'({meaning}): not recording until it is back')
 
     def _on_place(self, msg):
         for status in msg.status:
