@@ -276,6 +276,8 @@ def test_a_lift_and_a_kidnap(ros, tmp_path, surveyed_model):
         assert max(near[-5:]) < 6, near
         assert wait_until(lambda: int(health(client)['fusion_restarts']) >= 3,
                           10, ros), health(client)   # start, floor, kidnap
+        # it restarted with the ten scans that disagreed
+        assert int(health(client)['fusion_scans_replayed']) == 10
         # the restart after the kidnap re-seeds where the robot now is
         assert len(drive.initial) >= 2, [p.header for p in drive.initial]
         assert {p.header.frame_id for p in drive.initial} == {'map_f1'}

@@ -28,6 +28,11 @@ the filter there (a lift); a scan of another place is otherwise not
 applied, and gets the current pose. Each scan is weighed as far as it is trusted: its
 misfit to odometry over the last seconds (:class:`.track_misfit.TrackMisfit`)
 widens it; the scans it widened are counted (``scans_off_track``).
+When the scans keep disagreeing with the particles (a kidnapped robot:
+:meth:`.particles.ParticleFilter.update`), the filter starts afresh at
+the first of those scans and applies them again with the odometry
+between them (kept, as far as they were applied with odometry since the
+filter started): it restarts with their evidence, not one scan's.
 Between scans the particles move up to ``move_lag`` behind the newest
 odometry.
 """
@@ -40,7 +45,7 @@ import numpy as np
 
 from ..place_switch import PlaceSwitch
 from .angles import wrap
-from .particles import ParticleFilter
+from .particles import DISAGREED, ParticleFilter
 from .track_misfit import TrackMisfit
 
 #: Why odometry or a scan was not applied (counted in ``Fusion.counts``).
@@ -133,6 +138,10 @@ class Fusion:
         self.last_scan = None   # stamp of the last scan applied
         self.filter.state = None
         self.misfit.clear()     # the recent scans' track
+        self.applied = deque(maxlen=self.filter.params.reset_after)
+        #                         the last scans applied with odometry since
+        #                         the filter started, for a restart: (stamp,
+        #                         xy, sigma, coverage, odometry pose)
 
     def set_pose(self, stamp, xy, yaw, sd, yaw_sd, place):
         """
@@ -172,6 +181,7 @@ class Fusion:
         self.place = place
         self.switch.reset()
         self.misfit.clear()
+        self.applied.clear()
         self.last_scan = stamp
         self.counts['set_pose'] += 1
 
@@ -222,6 +232,7 @@ class Fusion:
         self.odom.clear()
         self.odom.append(pose)
         self.misfit.clear()
+        self.applied.clear()    # their odometry poses: the old frame
         if self.anchor is not None:
             self.anchor = pose
 
@@ -341,21 +352,52 @@ class Fusion:
             self.place = place
         if not odometry or restart:     # the scans' track starts again
             self.misfit.clear()
+            self.applied.clear()
         if place is not None:
             misfit = self.misfit.add(stamp, xy, at[1:3]) if odometry \
                 else None
             sensor = self.filter.sensor
             scan = sensor.measurement(xy, sigma, misfit, coverage)
             self.counts['scans_off_track'] += sensor.off_track(scan)
-            if self.filter.update(scan):
+            if odometry:
+                self.applied.append((stamp, xy, sigma, coverage, at))
+            why = self.filter.update(scan)
+            if why:
                 restart = True
                 self.misfit.clear()
+                if why == DISAGREED and \
+                        len(self.applied) == self.applied.maxlen:
+                    self._replay()
+                self.applied.clear()
         self.counts['restarts'] += restart
         self.last_scan = stamp
         self.counts['scans_fused' if odometry else 'scans_alone'] += 1
         estimate = self.filter.estimate()
         return FusedPose(stamp, estimate.xy, estimate.yaw, estimate.cov,
                          odometry, restart, self.place)
+
+    def _replay(self):
+        """
+        Start afresh at the first scan kept, and apply them all again.
+
+        Each with its position, sigma and coverage, and its misfit on the
+        new track; the particles moved by the odometry between them, and
+        on to where the particles were (:attr:`anchor`).
+        """
+        sensor = self.filter.sensor
+        self.misfit.clear()
+        before = None
+        for stamp, xy, sigma, coverage, at in self.applied:
+            misfit = self.misfit.add(stamp, xy, at[1:3])
+            scan = sensor.measurement(xy, sigma, misfit, coverage)
+            if before is None:
+                self.filter.start(sensor.centre(scan))
+            else:
+                self.filter.move(*relative(before[1:], at[1:]))
+            before = at
+            self.filter.update(scan)
+        self.filter.move(*relative(before[1:], self.anchor[1:]))
+        self.counts['scans_replayed'] += len(self.applied)
 
     def pose(self):
         """

@@ -23,6 +23,8 @@ from .sensor import WifiSensorModel
 UNKNOWN_VARIANCE = 1e6
 #: Below this mean resultant length of the headings, the yaw is unknown.
 MIN_RESULTANT = 0.5
+#: Why :meth:`ParticleFilter.update` started afresh.
+DISAGREED, NOTHING_FITS = 'disagreed', 'nothing fits'
 
 
 @dataclass(frozen=True)
@@ -163,12 +165,14 @@ class ParticleFilter:
 
     def update(self, scan):
         """
-        Weigh the particles by a measurement; return True on a restart.
+        Weigh the particles by a measurement; return why it restarted.
 
         ``scan``: what the sensor model weighs (a :class:`WifiPosition`).
         After ``reset_after`` scans in a row that the sensor model finds
-        too far from the estimate, the filter starts afresh at the scan:
-        the robot was carried away (kidnapped), or the filter went wrong.
+        too far from the estimate, the filter starts afresh at the scan
+        (:data:`DISAGREED`): the robot was carried away (kidnapped), or the
+        filter went wrong; it does too when no particle fits the scan
+        (:data:`NOTHING_FITS`). '' when it did not restart.
         """
         if self.sensor.disagrees(*self.position(), scan):
             self.disagreeing += 1
@@ -176,16 +180,16 @@ class ParticleFilter:
             self.disagreeing = 0
         if self.disagreeing >= self.params.reset_after:
             self.start(self.sensor.centre(scan))
-            return True
+            return DISAGREED
         self.weight = self.weight * self.sensor.likelihood(self.state, scan)
         total = self.weight.sum()
-        if not (math.isfinite(total) and total > 0):    # nothing fits
+        if not (math.isfinite(total) and total > 0):
             self.start(self.sensor.centre(scan))
-            return True
+            return NOTHING_FITS
         self.weight /= total
         if 1.0 / (self.weight ** 2).sum() < len(self.weight) / 2:
             self._resample()
-        return False
+        return ''
 
     def _resample(self):
         """Low-variance resampling."""

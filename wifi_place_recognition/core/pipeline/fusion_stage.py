@@ -33,6 +33,7 @@ HEALTH_NAMES = {'odometry': 'odometry_received',
                 'scans_off_track': 'fusion_scans_off_track',
                 'scans_without_position': 'fusion_scans_without_position',
                 'restarts': 'fusion_restarts',
+                'scans_replayed': 'fusion_scans_replayed',
                 'set_pose': 'fusion_set_pose',
                 'scans_before_set_pose': 'fusion_scans_before_set_pose'}
 #: Scans kept waiting for odometry at most (more: the oldest forgotten).
@@ -192,7 +193,8 @@ class FusionStage:
                   ('odometry', 'odometry_same_stamp') + ODOMETRY_FAULTS +
                   ('scans_fused', 'scans_alone', 'scans_other_place',
                    'scans_late', 'scans_off_track', 'scans_without_position',
-                   'restarts', 'set_pose', 'scans_before_set_pose')}
+                   'restarts', 'scans_replayed', 'set_pose',
+                   'scans_before_set_pose')}
         values['fusion_internal_errors'] = self.counts_internal
         what, when = self._last_problem
         silent = now - self._odometry_arrival
