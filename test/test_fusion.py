@@ -296,19 +296,26 @@ def test_a_set_pose_starts_the_filter_with_its_heading_carried_by_odometry():
     assert estimate.cov[2, 2] == UNKNOWN_VARIANCE
 
 
-def test_a_set_pose_before_any_odometry_is_anchored_by_the_first_scan():
+def test_a_set_pose_before_any_odometry_is_anchored_at_its_stamp():
+    """
+    Set at 0 s, odometry from 0 s, the first scan at 2.45 s: the motion
+    before that scan counts too (the pose is given from the first
+    odometry on, not from the first scan).
+    """
     fusion = Fusion(seed=0)
     fusion.set_pose(0.0, [3.0, 4.0], math.pi / 2, 0.2, 0.05, PLACE)
-    truth, odo = straight(n=40, yaw=0.0)    # drives 2 m ahead
+    truth, odo = straight(n=40, yaw=0.0)    # drives 1.95 m ahead
     released = []
-    for row in odo[:5]:
+    for row in odo[:11]:
         released += fusion.odometry(*row)[1]
-    released += fusion.scan(0.45, [3.0, 4.0], PLACE) or []
-    for row in odo[5:]:
+    pose = fusion.pose()    # 0.5 m along the set heading (+y), not from x
+    assert np.allclose(pose.xy, [3.0, 4.5], atol=0.1), pose.xy
+    released += fusion.scan(2.45, [3.0, 5.225], PLACE) or []
+    for row in odo[11:]:
         released += fusion.odometry(*row)[1]
     assert [p.restarted for p in released] == [False]
-    pose = fusion.pose()    # 2 m along the set heading (+y), not from x
-    assert np.allclose(pose.xy, [3.0, 5.75], atol=0.3), pose.xy
+    pose = fusion.pose()
+    assert np.allclose(pose.xy, [3.0, 5.95], atol=0.3), pose.xy
     assert abs(wrap(pose.yaw - math.pi / 2)) < math.radians(3)
 
 

@@ -133,6 +133,7 @@ class Fusion:
         self.pending = []       # (stamp, xy, place or None: not applied,
         #                         arrival, sigma, coverage), in stamp order
         self.anchor = None      # the odometry pose the particles are at
+        self.set_at = None      # a set pose's stamp, waiting for odometry
         self.place = None
         self.switch.reset()     # to another place: PlaceSwitch's rule
         self.last_scan = None   # stamp of the last scan applied
@@ -152,7 +153,8 @@ class Fusion:
         ``yaw`` None: not known (every heading, as a start from a scan).
         Where odometry covers the stamp, a pose with a yaw is carried to
         the newest odometry by the motion since; before any odometry, the
-        next scan's odometry pose anchors it. Scans waiting from before
+        odometry at its stamp (the first after it) anchors it, as soon as
+        odometry reaches the stamp. Scans waiting from before
         ``stamp`` are dropped (counted: ``scans_before_set_pose``).
         ValueError (naming the value) on a non-finite pose or stamp, or a
         spread not finite and >= 0.
@@ -171,12 +173,12 @@ class Fusion:
         kept = [item for item in self.pending if item[0] >= stamp]
         self.counts['scans_before_set_pose'] += len(self.pending) - len(kept)
         self.pending = kept
-        self.anchor = None
+        self.anchor, self.set_at = None, stamp
         if self.odom:
             if yaw is not None:
                 xy, yaw = compose(xy, yaw, relative(
                     self._odometry_at(stamp)[1:], self.odom[-1][1:]))
-            self.anchor = self.odom[-1]
+            self.anchor, self.set_at = self.odom[-1], None
         self.filter.start(xy, yaw, sd, yaw_sd)
         self.place = place
         self.switch.reset()
@@ -217,6 +219,9 @@ class Fusion:
                 return self._fault('odometry_jump'), []
         self.odom.append(pose)
         self.counts['odometry'] += 1
+        if self.set_at is not None and pose[0] >= self.set_at and \
+                self.anchor is None:     # a pose set before any odometry
+            self.anchor, self.set_at = self._odometry_at(self.set_at), None
         return None, self._advance()
 
     def _fault(self, reason):
@@ -325,6 +330,7 @@ class Fusion:
         stamp, xy, place, _, sigma, coverage = scan
         if place is None and not self.filter.started:
             return None
+        self.set_at = None      # a scan anchors the particles from now on
         restart = place is not None and (not self.filter.started or
                                          place != self.place)
         if odometry:
