@@ -298,9 +298,10 @@ def test_a_set_pose_starts_the_filter_with_its_heading_carried_by_odometry():
 
 def test_a_set_pose_before_any_odometry_is_anchored_at_its_stamp():
     """
-    Set at 0 s, odometry from 0 s, the first scan at 2.45 s: the motion
-    before that scan counts too (the pose is given from the first
-    odometry on, not from the first scan).
+    Set at 0 s, odometry from 0 s, the first scan at 2.45 s.
+
+    The motion before that scan counts too: the pose is given from the
+    first odometry on, not from the first scan.
     """
     fusion = Fusion(seed=0)
     fusion.set_pose(0.0, [3.0, 4.0], math.pi / 2, 0.2, 0.05, PLACE)
