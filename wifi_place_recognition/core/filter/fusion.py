@@ -31,8 +31,8 @@ widens it; the scans it widened are counted (``scans_off_track``).
 When the scans keep disagreeing with the particles (a kidnapped robot:
 :meth:`.particles.ParticleFilter.update`), the filter starts afresh at
 the first of those scans and applies them again with the odometry
-between them (kept, as far as they were applied with odometry since the
-filter started): it restarts with their evidence, not one scan's.
+between them (when each of them was applied with odometry): it restarts
+with their evidence, not one scan's.
 Between scans the particles move up to ``move_lag`` behind the newest
 odometry.
 """
