@@ -15,13 +15,13 @@ started (not ``waiting``) and not stopped (:data:`GONE`: its latched
 state outlives it, so a dead witness's ``agrees`` must not count). Its
 ``cannot_tell`` does not block: inside a survey hole WiFi cannot
 testify, and that is where recording matters; except after a jump: a
-jump may be a correction or the localiser going wrong, and only WiFi
-can tell which, so after one nothing is recorded until the witness says ``agrees`` at least
-``settle_s`` after it (``settle_s`` no shorter than the witness's
-``max_age``, 10 s, for which an earlier comparison still says
-``agrees``). The building and floor come from the current place; with none
-yet, nothing is trusted. :class:`TrustGate` applies the rule live, to
-the streams as they come (what trusted_recorder runs, and the
+jump may be a correction or the localiser going wrong, and only WiFi can
+tell which, so after one nothing is recorded until the witness says
+``agrees`` at least ``settle_s`` after it (``settle_s`` no shorter than
+the witness's ``max_age``, 10 s, for which an earlier comparison still
+says ``agrees``). The building and floor come from the current place;
+with none yet, nothing is trusted. :class:`TrustGate` applies the rule
+live, to the streams as they come (what trusted_recorder runs, and the
 self-update benchmark offline).
 """
 

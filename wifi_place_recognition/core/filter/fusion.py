@@ -25,14 +25,14 @@ scan, or start afresh at the scan when that spread exceeds a start's.
 dock's, an operator's), heading included, which a start from a scan
 lacks. Two confident scans in a row of another building/floor restart
 the filter there (a lift); a scan of another place is otherwise not
-applied, and gets the current pose. Each scan is weighed as far as it is trusted: its
-misfit to odometry over the last seconds (:class:`.track_misfit.TrackMisfit`)
-widens it; the scans it widened are counted (``scans_off_track``).
-When the scans keep disagreeing with the particles (a kidnapped robot:
-:meth:`.particles.ParticleFilter.update`), the filter starts afresh at
-the first of those scans and applies them again with the odometry
-between them (when each of them was applied with odometry): it restarts
-with their evidence, not one scan's.
+applied, and gets the current pose. Each scan is weighed as far as it is
+trusted: its misfit to odometry over the last seconds
+(:class:`.track_misfit.TrackMisfit`) widens it; the scans it widened are
+counted (``scans_off_track``). When the scans keep disagreeing with the
+particles (a kidnapped robot: :meth:`.particles.ParticleFilter.update`),
+the filter starts afresh at the first of those scans and applies them
+again with the odometry between them (when each of them was applied with
+odometry): it restarts with their evidence, not one scan's.
 Between scans the particles move up to ``move_lag`` behind the newest
 odometry.
 """

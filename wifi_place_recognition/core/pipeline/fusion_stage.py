@@ -24,7 +24,8 @@ from .outputs import Pose
 
 #: Seconds after a problem during which health names it.
 WARN_S = 10.0
-#: Names of :class:`.filter.fusion.Fusion` counts in the health status.
+#: Names of :class:`.filter.fusion.Fusion` counts in the health status
+#: (after the odometry's own counts, in this order).
 HEALTH_NAMES = {'odometry': 'odometry_received',
                 'scans_fused': 'fusion_scans_fused',
                 'scans_alone': 'fusion_scans_alone',
@@ -191,10 +192,7 @@ class FusionStage:
         counts = self.fusion.counts
         values = {HEALTH_NAMES.get(k, k): counts.get(k, 0) for k in
                   ('odometry', 'odometry_same_stamp') + ODOMETRY_FAULTS +
-                  ('scans_fused', 'scans_alone', 'scans_other_place',
-                   'scans_late', 'scans_off_track', 'scans_without_position',
-                   'restarts', 'scans_replayed', 'set_pose',
-                   'scans_before_set_pose')}
+                  tuple(HEALTH_NAMES)[1:]}
         values['fusion_internal_errors'] = self.counts_internal
         what, when = self._last_problem
         silent = now - self._odometry_arrival
