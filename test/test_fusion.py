@@ -21,7 +21,7 @@ from wifi_place_recognition.core.filter.fusion import Fusion, FusionLimits
 from wifi_place_recognition.core.filter.odometry_fit import (FitError,
                                                              fit_odometry)
 from wifi_place_recognition.core.filter.particles import (
-    FusionParams, UNKNOWN_VARIANCE)
+    FusionParams, ParticleFilter, UNKNOWN_VARIANCE)
 from wifi_place_recognition.core.filter.trajectory import (
     dead_reckoning, fuse_offline, odometry_alone, score)
 from wifi_place_recognition.data.files import DataError
@@ -228,6 +228,35 @@ def test_the_filter_finds_the_heading_and_follows_a_drifting_odometry():
     assert np.degrees(np.abs(wrap(yaw[late]))).max() < 5
     figures = score(stamps, truth[at, 1:3], xy, truth[at, 3], yaw, cov)
     assert 0.8 <= figures['in_95_ellipse'] <= 1.0
+
+
+def test_the_pose_lies_on_the_ring_a_start_spreads_not_inside_it():
+    """
+    A start with every heading, then 10 m straight ahead.
+
+    The particles lie on a ring of 10 m round the start, each heading
+    away from it; the scans favour those heading near 0 (weights of a
+    von Mises of concentration 0.5: the heading still unknown). The
+    robot is at (10, 0): the mean of every particle lies about 2.4 m from
+    the start, the pose on the ring's heavier side.
+    """
+    pf = ParticleFilter(FusionParams(), seed=0)
+    pf.start([0.0, 0.0])
+    pf.move(10.0, 0.0, 0.0)
+    pf.weight = np.exp(0.5 * np.cos(pf.state[:, 2]))
+    pf.weight /= pf.weight.sum()
+    estimate = pf.estimate()
+    assert estimate.cov[2, 2] == UNKNOWN_VARIANCE
+    assert np.linalg.norm(pf.position()[0]) < 3.0      # inside the ring
+    assert np.linalg.norm(estimate.xy - [10.0, 0.0]) < 2.5, estimate.xy
+    spread = np.linalg.norm(pf.state[:, :2] - estimate.xy, axis=1)
+    assert np.trace(estimate.cov[:2, :2]) == \
+        pytest.approx(pf.weight @ spread ** 2)
+    # no particle heads within the window of the mean heading: all count
+    pf.state[:, :2] = [[0.0, 5.0], [0.0, -5.0]] * (len(pf.weight) // 2)
+    pf.state[:, 2] = [math.pi / 2, -math.pi / 2] * (len(pf.weight) // 2)
+    pf.weight[:] = 1.0 / len(pf.weight)
+    assert np.allclose(pf.estimate().xy, [0.0, 0.0])
 
 
 def test_a_kidnapped_robot_restarts_with_the_scans_that_disagreed():

@@ -23,6 +23,9 @@ from .sensor import WifiSensorModel
 UNKNOWN_VARIANCE = 1e6
 #: Below this mean resultant length of the headings, the yaw is unknown.
 MIN_RESULTANT = 0.5
+#: The reported position is the mean of the particles heading within this
+#: (rad) of the mean heading (:meth:`ParticleFilter.estimate`).
+HEADING_WINDOW = math.radians(60.0)
 #: Why :meth:`ParticleFilter.update` started afresh.
 DISAGREED, NOTHING_FITS = 'disagreed', 'nothing fits'
 
@@ -208,18 +211,28 @@ class ParticleFilter:
 
     def estimate(self):
         """
-        Return the weighted mean pose and its covariance.
+        Return the pose and its covariance.
 
-        While the headings are spread round the circle (their mean
-        resultant length below :data:`MIN_RESULTANT`: after a start), the
-        yaw is unknown: its variance :data:`UNKNOWN_VARIANCE`.
+        The yaw is the particles' weighted mean heading; the position the
+        weighted mean of the particles heading within
+        :data:`HEADING_WINDOW` of it (of all, if none is). After a start
+        with every heading the particles spread on a ring round the start
+        as the robot drives, and the mean of all lies inside it, where no
+        particle is; once the headings gather, the two agree. The
+        covariance is the whole cloud's about that pose. While the
+        headings are spread round the circle (their mean resultant length
+        below :data:`MIN_RESULTANT`), the yaw is unknown: its variance
+        :data:`UNKNOWN_VARIANCE`.
         """
         w = self.weight
-        xy = w @ self.state[:, :2]
         c, s = w @ np.cos(self.state[:, 2]), w @ np.sin(self.state[:, 2])
         yaw = math.atan2(s, c)
-        delta = np.column_stack([self.state[:, :2] - xy,
-                                 wrap(self.state[:, 2] - yaw)])
+        turn = wrap(self.state[:, 2] - yaw)
+        ahead = w * (np.abs(turn) < HEADING_WINDOW)
+        if not ahead.any():     # no particle heads near the mean heading
+            ahead = w
+        xy = ahead @ self.state[:, :2] / ahead.sum()
+        delta = np.column_stack([self.state[:, :2] - xy, turn])
         cov = (delta * w[:, None]).T @ delta
         if math.hypot(c, s) < MIN_RESULTANT:
             cov[2, :] = cov[:, 2] = 0.0
