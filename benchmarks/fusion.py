@@ -96,6 +96,7 @@ CANDIDATES = (
     {'sigma_scale': 2.0},
     {'wifi_outlier': 0.2},
     {'wifi_sd': 3.0},
+    {'pose_scans': 0},              # the particles' spread as covariance
 )
 
 

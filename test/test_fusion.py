@@ -259,6 +259,51 @@ def test_the_pose_lies_on_the_ring_a_start_spreads_not_inside_it():
     assert np.allclose(pf.estimate().xy, [0.0, 0.0])
 
 
+def test_the_pose_is_as_sure_as_the_last_scans_lie_near_it():
+    """
+    A drive with scans of 1 m noise; from 60 s on they lie 6 m aside.
+
+    Once the heading is known and ten scans were applied, x and y each
+    have the variance of the last ten scans' mean offset from the pose
+    (the particles' spread before, and with ``pose_scans`` 0); scans that
+    move off make it wider; with odometry alone it grows as the particles
+    spread.
+    """
+    truth, odo = straight(n=1200)
+    at = np.arange(5, 1200, 10)
+    stamps = truth[at, 0] + 0.01
+    scans = truth[at, 1:3] + np.random.default_rng(2).normal(0, 1.0,
+                                                             (len(at), 2))
+    scans[stamps > 60] += [0.0, 6.0]
+    xy, _, cov = fuse_offline(odo, (stamps, scans), Fusion(seed=0))
+    known = np.flatnonzero(cov[:, 2, 2] < UNKNOWN_VARIANCE)
+    assert 10 < known[0] < 30, known[0]
+    assert cov[known[0] - 1, 2, 2] == UNKNOWN_VARIANCE
+    assert cov[known[0] - 1, 0, 1] != 0.0     # the particles' spread
+    offsets = scans - xy
+    for i in range(max(known[0], 9), len(at)):
+        mean = offsets[i - 9:i + 1].mean(axis=0)
+        assert cov[i, 0, 0] == cov[i, 1, 1] == pytest.approx(mean @ mean)
+        assert cov[i, 0, 1] == cov[i, 0, 2] == cov[i, 1, 2] == 0.0
+    aside = stamps > 60
+    assert np.sqrt(cov[aside, 0, 0]).max() > \
+        2 * np.sqrt(cov[(stamps > 40) & ~aside, 0, 0]).max()
+    cloud = fuse_offline(odo, (stamps, scans),
+                         Fusion(FusionParams(pose_scans=0), seed=0))[2]
+    assert cloud[known[0], 0, 1] != 0.0     # the particles' own
+    assert not np.allclose(cloud[known[-1]], cov[known[-1]])
+    # odometry alone after the last scan: the spread the particles gain
+    fusion = Fusion(seed=0)
+    fuse_offline(odo[:1000], (stamps[:90], scans[:90]), fusion)
+    for row in odo[1000:]:
+        fusion.odometry(*row)
+    gained = np.trace(fusion.filter.estimate().cov[:2, :2]) / 2 - \
+        fusion.spread
+    assert gained > 0.1
+    assert fusion.pose().cov[0, 0] == \
+        pytest.approx(fusion.offsets.variance() + gained)
+
+
 def test_a_kidnapped_robot_restarts_with_the_scans_that_disagreed():
     """
     Carried 30 m aside at 60 s, odometry none the wiser; scans 0.5 m noise.
@@ -355,6 +400,9 @@ def test_fusion_parameters_are_checked_and_kept_in_the_model_file(
         FusionParams(wifi_sd=0)
     with pytest.raises(ValueError, match='particles = 2.5'):
         FusionParams(particles=2.5)
+    for bad in (-1, 2.5, 10 ** 5):
+        with pytest.raises(ValueError, match=f'pose_scans = {bad}'):
+            FusionParams(pose_scans=bad)
     with pytest.raises(ValueError, match='heading_noise = nan'):
         FusionParams(heading_noise=math.nan)
     with pytest.raises(ValueError, match='unknown fusion parameter'):

@@ -34,7 +34,9 @@ the filter starts afresh at the first of those scans and applies them
 again with the odometry between them (when each of them was applied with
 odometry): it restarts with their evidence, not one scan's.
 Between scans the particles move up to ``move_lag`` behind the newest
-odometry.
+odometry. Once the heading is known, the pose's covariance on x and y is
+how far the last ``pose_scans`` scans lie from it
+(:mod:`.pose_spread`), not the particles' spread.
 """
 
 from collections import Counter, deque
@@ -45,7 +47,8 @@ import numpy as np
 
 from ..place_switch import PlaceSwitch
 from .angles import wrap
-from .particles import DISAGREED, ParticleFilter
+from .particles import DISAGREED, ParticleFilter, UNKNOWN_VARIANCE
+from .pose_spread import ScanOffsets
 from .track_misfit import TrackMisfit
 
 #: Why odometry or a scan was not applied (counted in ``Fusion.counts``).
@@ -123,6 +126,7 @@ class Fusion:
         self.filter = ParticleFilter(params, seed, sensor)
         self.switch = PlaceSwitch()
         self.misfit = TrackMisfit(self.filter.params.track_s)
+        self.offsets = ScanOffsets(self.filter.params.pose_scans)
         self.limits = limits or FusionLimits()
         self.counts = Counter()
         self.reset()
@@ -139,6 +143,8 @@ class Fusion:
         self.last_scan = None   # stamp of the last scan applied
         self.filter.state = None
         self.misfit.clear()     # the recent scans' track
+        self.offsets.clear()    # the recent scans' offsets from the pose
+        self.spread = 0.0       # the particles' variance at the last scan
         self.applied = deque(maxlen=self.filter.params.reset_after)
         #                         the last scans applied with odometry since
         #                         the filter started, for a restart: (stamp,
@@ -183,6 +189,7 @@ class Fusion:
         self.place = place
         self.switch.reset()
         self.misfit.clear()
+        self.offsets.clear()
         self.applied.clear()
         self.last_scan = stamp
         self.counts['set_pose'] += 1
@@ -355,6 +362,7 @@ class Fusion:
                 self.filter.spread(max(gap, 0.0))
         if restart:
             self.filter.start(xy)
+            self.offsets.clear()
             self.place = place
         if not odometry or restart:     # the scans' track starts again
             self.misfit.clear()
@@ -371,6 +379,7 @@ class Fusion:
             if why:
                 restart = True
                 self.misfit.clear()
+                self.offsets.clear()
                 if why == DISAGREED and \
                         len(self.applied) == self.applied.maxlen:
                     self._replay()
@@ -379,8 +388,31 @@ class Fusion:
         self.last_scan = stamp
         self.counts['scans_fused' if odometry else 'scans_alone'] += 1
         estimate = self.filter.estimate()
-        return FusedPose(stamp, estimate.xy, estimate.yaw, estimate.cov,
-                         odometry, restart, self.place)
+        if place is not None:
+            self.offsets.add(xy, estimate.xy)
+        self.spread = np.trace(estimate.cov[:2, :2]) / 2
+        return FusedPose(stamp, estimate.xy, estimate.yaw,
+                         self._covariance(estimate), odometry, restart,
+                         self.place)
+
+    def _covariance(self, estimate):
+        """
+        Return the pose's covariance.
+
+        Once the heading is known and ``pose_scans`` scans were applied
+        since the start: the variance :class:`.pose_spread.ScanOffsets`
+        gives on x and y, plus what the particles spread since the last
+        scan (odometry alone), and the particles' yaw variance; before,
+        the particles' covariance.
+        """
+        variance = self.offsets.variance()
+        if variance is None or estimate.cov[2, 2] >= UNKNOWN_VARIANCE:
+            return estimate.cov
+        grown = max(np.trace(estimate.cov[:2, :2]) / 2 - self.spread, 0.0)
+        cov = np.zeros((3, 3))
+        cov[0, 0] = cov[1, 1] = variance + grown
+        cov[2, 2] = estimate.cov[2, 2]
+        return cov
 
     def _replay(self):
         """
@@ -410,12 +442,12 @@ class Fusion:
         Return the pose at the newest odometry, between scans, or None.
 
         The filter's estimate carried forward by the odometry since its
-        last step (the covariance as at that step).
+        last step (the covariance as at that step: :meth:`_covariance`).
         """
         if not self.filter.started or self.anchor is None or not self.odom:
             return None
         estimate = self.filter.estimate()
         xy, yaw = compose(estimate.xy, estimate.yaw,
                           relative(self.anchor[1:], self.odom[-1][1:]))
-        return FusedPose(self.odom[-1][0], xy, yaw, estimate.cov, True,
-                         False, self.place)
+        return FusedPose(self.odom[-1][0], xy, yaw,
+                         self._covariance(estimate), True, False, self.place)

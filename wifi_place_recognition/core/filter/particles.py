@@ -62,12 +62,16 @@ class FusionParams(SectionParams):
     reset_after: int = 10             # so many in a row: start afresh
     idle_speed: float = 0.5           # m/s: spread per second without odometry
     idle_turn_rate: float = 0.5       # rad/s: the same for the heading
+    pose_scans: int = 10              # the pose's covariance from the last
+    #                                   so many scans' offsets (0: the
+    #                                   particles' spread; .pose_spread)
     fit: dict = None                  # how they were chosen (free-form)
 
     def __post_init__(self):
         """Refuse values that would make the filter meaningless."""
         super().__post_init__()
-        for name, top in (('particles', 10 ** 6), ('reset_after', 10 ** 6)):
+        for name, top in (('particles', 10 ** 6), ('reset_after', 10 ** 6),
+                          ('pose_scans', 10 ** 4)):
             value = getattr(self, name)
             if value != int(value) or value > top:
                 raise ValueError(f'fusion parameter {name} = {value!r}: '
