@@ -22,6 +22,7 @@ from wifi_place_recognition.core.filter.odometry_fit import (FitError,
                                                              fit_odometry)
 from wifi_place_recognition.core.filter.particles import (
     FusionParams, ParticleFilter, UNKNOWN_VARIANCE)
+from wifi_place_recognition.core.filter.pose_spread import SETTLE_SCANS
 from wifi_place_recognition.core.filter.trajectory import (
     dead_reckoning, fuse_offline, odometry_alone, score)
 from wifi_place_recognition.data.files import DataError
@@ -263,10 +264,10 @@ def test_the_pose_is_as_sure_as_the_last_scans_lie_near_it():
     """
     A drive with scans of 1 m noise; from 60 s on they lie 6 m aside.
 
-    Once the heading is known and ten scans were applied, x and y each
-    have the variance of the last ten scans' mean offset from the pose
-    (the particles' spread before, and with ``pose_scans`` 0); scans that
-    move off make it wider; with odometry alone it grows as the particles
+    Once 30 scans were applied with the heading known, x and y each have
+    the variance of the last ten scans' mean offset from the pose (the
+    particles' spread before, and with ``pose_scans`` 0); scans that move
+    off make it wider; with odometry alone it grows as the particles
     spread.
     """
     truth, odo = straight(n=1200)
@@ -277,17 +278,18 @@ def test_the_pose_is_as_sure_as_the_last_scans_lie_near_it():
     scans[stamps > 60] += [0.0, 6.0]
     xy, _, cov = fuse_offline(odo, (stamps, scans), Fusion(seed=0))
     known = np.flatnonzero(cov[:, 2, 2] < UNKNOWN_VARIANCE)
-    assert 10 < known[0] < 30, known[0]
+    assert 0 < known[0] < 30, known[0]
     assert cov[known[0] - 1, 2, 2] == UNKNOWN_VARIANCE
-    assert cov[known[0] - 1, 0, 1] != 0.0     # the particles' spread
+    settled = known[0] + SETTLE_SCANS - 1
+    assert cov[settled - 1, 0, 1] != 0.0     # the particles' spread
     offsets = scans - xy
-    for i in range(max(known[0], 9), len(at)):
+    for i in range(settled, len(at)):
         mean = offsets[i - 9:i + 1].mean(axis=0)
         assert cov[i, 0, 0] == cov[i, 1, 1] == pytest.approx(mean @ mean)
         assert cov[i, 0, 1] == cov[i, 0, 2] == cov[i, 1, 2] == 0.0
     aside = stamps > 60
     assert np.sqrt(cov[aside, 0, 0]).max() > \
-        2 * np.sqrt(cov[(stamps > 40) & ~aside, 0, 0]).max()
+        2 * np.sqrt(cov[settled:][~aside[settled:], 0, 0]).max()
     cloud = fuse_offline(odo, (stamps, scans),
                          Fusion(FusionParams(pose_scans=0), seed=0))[2]
     assert cloud[known[0], 0, 1] != 0.0     # the particles' own

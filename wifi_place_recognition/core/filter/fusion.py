@@ -34,8 +34,8 @@ the filter starts afresh at the first of those scans and applies them
 again with the odometry between them (when each of them was applied with
 odometry): it restarts with their evidence, not one scan's.
 Between scans the particles move up to ``move_lag`` behind the newest
-odometry. Once the heading is known, the pose's covariance on x and y is
-how far the last ``pose_scans`` scans lie from it
+odometry. Once the filter has settled, the pose's covariance on x and y
+is how far the last ``pose_scans`` scans lie from it
 (:mod:`.pose_spread`), not the particles' spread.
 """
 
@@ -389,7 +389,8 @@ class Fusion:
         self.counts['scans_fused' if odometry else 'scans_alone'] += 1
         estimate = self.filter.estimate()
         if place is not None:
-            self.offsets.add(xy, estimate.xy)
+            self.offsets.add(xy, estimate.xy,
+                             estimate.cov[2, 2] < UNKNOWN_VARIANCE)
         self.spread = np.trace(estimate.cov[:2, :2]) / 2
         return FusedPose(stamp, estimate.xy, estimate.yaw,
                          self._covariance(estimate), odometry, restart,
@@ -399,14 +400,14 @@ class Fusion:
         """
         Return the pose's covariance.
 
-        Once the heading is known and ``pose_scans`` scans were applied
-        since the start: the variance :class:`.pose_spread.ScanOffsets`
-        gives on x and y, plus what the particles spread since the last
-        scan (odometry alone), and the particles' yaw variance; before,
-        the particles' covariance.
+        Once the filter has settled (:class:`.pose_spread.ScanOffsets`):
+        the variance of the last ``pose_scans`` scans' offsets on x and y,
+        plus what the particles spread since the last scan (odometry
+        alone), and the particles' yaw variance; before, the particles'
+        covariance.
         """
         variance = self.offsets.variance()
-        if variance is None or estimate.cov[2, 2] >= UNKNOWN_VARIANCE:
+        if variance is None:
             return estimate.cov
         grown = max(np.trace(estimate.cov[:2, :2]) / 2 - self.spread, 0.0)
         cov = np.zeros((3, 3))

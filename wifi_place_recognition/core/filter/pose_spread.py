@@ -7,15 +7,20 @@ surveyed ground it is wider than the pose's error, and where the scans of
 a survey hole drag the particles along together it is narrower.
 :class:`ScanOffsets` keeps the offsets of the last scans from the pose
 after each was applied: their mean is where the scans, averaged along the
-track, say the pose is wrong (their noise averages out, a drag or a pose
-left behind by scans that moved on does not). Its length is the pose's
-standard deviation on each axis (ROS-free).
+track, say the pose is wrong (their noise averages out, a pose that
+crosses a hole on odometry or is left behind after one keeps them long).
+Its length is the pose's standard deviation on each axis, once the
+filter has settled: a filter whose heading was only just found follows
+the scans it found it from, biased or not, and their offsets are small
+while it may be metres off (ROS-free).
 """
 
 from collections import deque
 
 import numpy as np
 
+#: Scans applied with the heading known before the offsets are used.
+SETTLE_SCANS = 30
 #: The least standard deviation (m) reported: keeps the covariance
 #: positive when the offsets happen to cancel.
 LEAST_SD = 0.01
@@ -25,27 +30,38 @@ class ScanOffsets:
     """The offsets (m) of the last ``scans`` scans from the fused pose."""
 
     def __init__(self, scans):
-        self.offsets = deque(maxlen=max(int(scans), 1))
         self.scans = int(scans)
+        self.offsets = deque(maxlen=max(self.scans, 1))
+        self.settled = 0    # scans applied since the heading was known
 
     def clear(self):
         """Forget them (the filter started afresh)."""
         self.offsets.clear()
+        self.settled = 0
 
-    def add(self, scan_xy, pose_xy):
-        """Add a scan's position and the pose after it was applied."""
+    def add(self, scan_xy, pose_xy, heading_known):
+        """
+        Add a scan's position and the pose after it was applied.
+
+        While the heading is not known, forget them all.
+        """
+        if not heading_known:
+            self.clear()
+            return
         self.offsets.append(np.asarray(scan_xy, np.float64) -
                             np.asarray(pose_xy, np.float64))
+        self.settled += 1
 
     def variance(self):
         """
         Return the pose's variance on each axis (m^2), or None.
 
         The squared length of the offsets' mean (at least
-        :data:`LEAST_SD` squared); None while fewer than ``scans`` scans
-        were added since the start, or with ``scans`` 0 (not used).
+        :data:`LEAST_SD` squared); None until :data:`SETTLE_SCANS` scans
+        (and ``scans``) were added with the heading known, and with
+        ``scans`` 0 (not used).
         """
-        if not self.scans or len(self.offsets) < self.scans:
+        if not self.scans or self.settled < max(SETTLE_SCANS, self.scans):
             return None
         mean = np.mean(self.offsets, axis=0)
         return max(float(mean @ mean), LEAST_SD ** 2)
