@@ -187,6 +187,13 @@ def test_a_drive_with_odometry_gives_a_fused_pose_with_yaw(
         cov = np.array(pose.pose.covariance).reshape(6, 6)
         assert pose.header.frame_id == 'map_f0'
         assert 0 < cov[5, 5] < 1.0 and cov[0, 0] > 0
+        # how sure: the last ten scans' mean offset from the pose (m, to
+        # the 1 mm of the diagnostics)
+        mean = np.mean([[float(v['scan_x']) - p.pose.pose.position.x,
+                         float(v['scan_y']) - p.pose.pose.position.y]
+                        for _, v, p in results[-10:]], axis=0)
+        assert cov[0, 0] == cov[1, 1] and cov[0, 1] == 0.0
+        assert abs(math.sqrt(cov[0, 0]) - np.linalg.norm(mean)) < 0.002
         # every scan's pose carries its stamp
         assert all(p.header.stamp.sec == int(math.floor(r[0]))
                    for r, _, p in results)
