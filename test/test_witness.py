@@ -247,6 +247,23 @@ def test_judge_offline_takes_the_streams_in_stamp_order():
     assert judge_offline(None, fused)[0].seed.startswith('start-up')
 
 
+def test_a_fused_pose_too_wide_to_tell_5_m_apart_does_not_agree():
+    """
+    The localiser 5 m off; a fused pose 3 m wide (its scans lie aside).
+
+    It cannot tell 5 m apart: no evidence either way, never ``agrees``
+    (a recorder takes ``agrees`` after a jump as the localiser checked).
+    One 1 m wide gathers evidence against the localiser.
+    """
+    def off(k):
+        return truth(k)[0] + [0.0, 5.0], 0.0
+    for fused_sd, state in ((3.0, CANNOT_TELL), (1.0, DISAGREES)):
+        w = Witness()
+        judged = drive(w, 8, local=off, fused_sd=fused_sd)
+        assert {j.ok for j in judged} == {True}
+        assert w.state == state, (fused_sd, w.state, w.why)
+
+
 def test_the_state_says_agrees_only_when_wifi_compared():
     p = WitnessParams()
     w = Witness(p)
@@ -256,7 +273,7 @@ def test_the_state_says_agrees_only_when_wifi_compared():
                                          'no WiFi pose or scan yet')
     w.fused(0, 'map', *truth(0), cov(p.max_fused_sd + 1))   # a wide filter
     assert w.ok and (w.state, w.why) == (CANNOT_TELL,
-                                         'fused pose too wide (6.0 m)')
+                                         'fused pose too wide (3.0 m)')
     drive(w, 5, start=1)
     assert (w.state, w.why) == (AGREES, '')
     # the WiFi stops, the localiser goes on: the comparison grows old

@@ -14,7 +14,9 @@ evidence:
   pose moved since the localiser's stamp (AMCL publishes only after it
   moved); the yaw's difference joins only when the fused yaw is known (its
   standard deviation below ``yaw_known_sd``). A fused pose wider than
-  ``max_fused_sd`` (a filter that just started) is no evidence either way,
+  ``max_fused_sd`` (a filter that just started, or one whose recent scans
+  lie metres aside of it: :mod:`.filter.pose_spread`) is no evidence
+  either way: it could not tell the localiser a few metres off,
   nor is one while most recent scans do not testify: a scan unlike every
   surveyed one says the robot is off the survey, where the scans snap
   to the nearest surveyed place and may drag the filter with them;

@@ -19,7 +19,8 @@ class WitnessParams:
     floor_sd: float = 0.5          # m added on each axis to both covariances
     yaw_floor_sd: float = math.radians(5.0)    # rad, the same for the yaw
     yaw_known_sd: float = math.radians(30.0)   # rad: wider fused yaw unknown
-    max_fused_sd: float = 5.0      # m: a wider fused pose is no evidence
+    max_fused_sd: float = 2.0      # m: a wider fused pose is no evidence
+    #                                (a young filter, scans aside of it)
     scan_floor_sd: float = 2.0     # m added on each axis for a scan
     coverage_m: float = 2.0        # m: scans testify within this of the survey
     max_scan_sigma: float = 3.0    # m: recent scans wider: the robot is off
