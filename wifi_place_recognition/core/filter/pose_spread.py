@@ -33,17 +33,20 @@ class ScanOffsets:
         self.scans = int(scans)
         self.offsets = deque(maxlen=max(self.scans, 1))
         self.settled = 0    # scans applied since the heading was known
+        self._variance = None
 
     def clear(self):
         """Forget them (the filter started afresh)."""
         self.offsets.clear()
         self.settled = 0
+        self._variance = None
 
     def add(self, scan_xy, pose_xy, heading_known):
         """
         Add a scan's position and the pose after it was applied.
 
-        While the heading is not known, forget them all.
+        While the heading is not known, forget them all. The variance is
+        worked out here, once per scan, not per pose asked for.
         """
         if not heading_known:
             self.clear()
@@ -51,6 +54,9 @@ class ScanOffsets:
         self.offsets.append(np.asarray(scan_xy, np.float64) -
                             np.asarray(pose_xy, np.float64))
         self.settled += 1
+        if self.scans and self.settled >= max(SETTLE_SCANS, self.scans):
+            mean = np.mean(self.offsets, axis=0)
+            self._variance = max(float(mean @ mean), LEAST_SD ** 2)
 
     def variance(self):
         """
@@ -61,7 +67,4 @@ class ScanOffsets:
         (and ``scans``) were added with the heading known, and with
         ``scans`` 0 (not used).
         """
-        if not self.scans or self.settled < max(SETTLE_SCANS, self.scans):
-            return None
-        mean = np.mean(self.offsets, axis=0)
-        return max(float(mean @ mean), LEAST_SD ** 2)
+        return self._variance
