@@ -35,7 +35,8 @@ one run's trajectories per building, seed 0, which
 ``benchmarks/figures.py`` draws).
 
     python benchmarks/fusion.py [--data ../shared/datasets/robot]
-    (a folder of building folders, each of runs: CSV folders or bags)
+    (a folder of building folders, or one building folder, each of runs:
+    CSV folders or bags; a building needs two runs)
     python benchmarks/fusion.py --select [--data ...]
 """
 
@@ -412,15 +413,52 @@ def summary_line(name, survey, figures):
 
 def site_runs(data, folder):
     """
-    Yield (building, its runs) of every building folder of ``data``.
+    Yield (building, its runs) of every building of ``data`` with two runs.
 
     A run is a folder of the shared runs' CSVs (``scans.csv``,
     ``odom.csv``, ``poses.csv``), or a bag (a rosbag2 folder or file, a
     ROS 1 bag: the package's topics, building 0, floor 0), exported to
-    those CSVs in ``folder`` first, as ``bag_to_csv`` writes them.
+    those CSVs in ``folder`` first, as ``bag_to_csv`` writes them. See
+    :func:`buildings` for what ``data`` may be.
     """
-    for site in sorted(d for d in data.iterdir() if d.is_dir()):
-        yield site.name, [Run(r) for r in run_folders(site, folder)]
+    for site, runs in buildings(data, folder):
+        yield site, [Run(r) for r in runs]
+
+
+def buildings(data, folder):
+    """
+    Yield (building, its run folders) of ``data``, each with two runs.
+
+    ``data``: a folder of building folders, or one building folder (its
+    entries are runs). A building with fewer than two runs is passed over
+    with a line on stderr (a test run is localised on a survey made of
+    another run of its building); a ``data`` that is not a folder, or that
+    has no building with two runs, stops the benchmark in one line.
+    """
+    data = Path(data)
+    if not data.is_dir():
+        raise SystemExit(f'error: --data {data}: no such folder')
+    sites = [data] if any(is_run(r) for r in data.iterdir()) else \
+        sorted(d for d in data.iterdir() if d.is_dir())
+    found = False
+    for site in sites:
+        runs = run_folders(site, folder)
+        if len(runs) < 2:
+            print(f'{site.name}: {len(runs)} run(s), passed over: a test run '
+                  f'is localised on another run of its building',
+                  file=sys.stderr)
+            continue
+        found = True
+        yield site.name, runs
+    if not found:
+        raise SystemExit(f'error: --data {data}: no building folder with two '
+                         f'runs or more (a run: a folder with scans.csv, '
+                         f'odom.csv and poses.csv, or a bag)')
+
+
+def is_run(path):
+    """Return whether ``path`` is a run: a folder with odom.csv, or a bag."""
+    return (path / 'odom.csv').exists() or is_bag(path)
 
 
 def run_folders(site, folder):
@@ -431,8 +469,7 @@ def run_folders(site, folder):
     columns, every AP any of them heard (as the shared runs are); a bag
     without odometry or poses stops the benchmark with one line.
     """
-    runs = [r for r in sorted(site.iterdir()) if (r / 'odom.csv').exists()
-            or is_bag(r)]
+    runs = [r for r in sorted(site.iterdir()) if is_run(r)]
     bags = {r: read_bag(r) for r in runs if is_bag(r)}
     for bag, recording in bags.items():
         if recording.odometry is None or recording.poses is None:

@@ -31,10 +31,10 @@ protocol: ``benchmarks/fusion.py``'s survey_holes).
   to the first seed, and its error.
 
 Every building's runs are scored with the node's defaults (any folder of
-runs, one building too). With two buildings or more, the thresholds
-(agree_sigmas, alarm, floor_sd, max_scan_sigma, yaw_floor_sd; then
-sure_sd, sure_yaw_sd) are also chosen on the others and reported on each
-(leave-one-building-out): on b14 for b24 and on b24 for b14, never on what
+runs, one building too: ``fusion.py``'s ``--data``). With two buildings
+or more, the thresholds (agree_sigmas, alarm, floor_sd, max_scan_sigma,
+yaw_floor_sd; then sure_sd, sure_yaw_sd) are also chosen on the others
+and reported on each (leave-one-building-out): on b14 for b24 and on b24 for b14, never on what
 is reported. Choice on the tuning building: the fewest false alarms (full
 and holes), then the fewest flagged inside AMCL's covariance, then the
 fewest missed, then the smallest sum of median and max detection delay;
@@ -71,7 +71,7 @@ from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.data.poses import read_poses
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from fusion import (run_folders, spliced_odometry,  # noqa: E402
+from fusion import (buildings, spliced_odometry,  # noqa: E402
                     survey_holes)
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -456,20 +456,18 @@ def main():
         folder = args.cache or Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
         cases = {}
-        for site in sorted(d for d in args.data.iterdir() if d.is_dir()):
-            runs = [Run(r) for r in run_folders(site, folder)]
-            if len(runs) < 2:
-                continue
+        for site, runs in buildings(args.data, folder):
+            runs = [Run(r) for r in runs]
             models = {r.name: {k: train(r, [o for o in runs if o is not r],
                                         folder, k == 'holes')
                                for k in ('full', 'holes')} for r in runs}
-            cases[site.name] = []
+            cases[site] = []
             for i, r in enumerate(runs):
                 partner = runs[(i + 1) % len(runs)]
-                cases[site.name].append(Case(
+                cases[site].append(Case(
                     r, partner, models[r.name],
                     models[partner.name]['full']))
-                print(f'{site.name}/{r.name}: cases ready', flush=True)
+                print(f'{site}/{r.name}: cases ready', flush=True)
     results = {'protocol': __doc__.strip(), 'seeds': SEEDS,
                'targets': TARGETS, 'buildings': {}}
     print(f'{"run":10s} {"FA/h":>6s} {"holes":>6s} {"med s":>6s} '
