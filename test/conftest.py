@@ -16,6 +16,7 @@ and the helpers they call), so new test files are sorted too:
 """
 
 import fcntl
+import importlib
 import inspect
 import os
 from pathlib import Path
@@ -172,6 +173,16 @@ def surveyed_model(tmp_path_factory):
         model, *FAST, '--epochs', '20'))
     assert result.returncode == 0, result.stderr
     return model
+
+
+@pytest.fixture(scope='module')
+def fusion():
+    """Return the benchmark module benchmarks/fusion.py."""
+    sys.path.insert(0, str(REPO / 'benchmarks'))
+    try:
+        return importlib.import_module('fusion')
+    finally:
+        sys.path.remove(str(REPO / 'benchmarks'))
 
 
 def run(args, **kwargs):

@@ -5,25 +5,11 @@ The CSVs labelled by the package's rule (the bags' labels): the shared
 runs' own labels interpolate across every gap between poses.
 """
 
-import importlib
-import sys
-
 from bag_helpers import relabelled, ROBOT, run_messages, write_bag
-from conftest import REPO
 import numpy as np
 import pytest
 
 RUNS = ('b24test2', 'b24test3')
-
-
-@pytest.fixture(scope='module')
-def fusion():
-    """Return the benchmark module benchmarks/fusion.py."""
-    sys.path.insert(0, str(REPO / 'benchmarks'))
-    try:
-        return importlib.import_module('fusion')
-    finally:
-        sys.path.remove(str(REPO / 'benchmarks'))
 
 
 @pytest.mark.skipif(not (ROBOT / 'b24').exists(),

@@ -5,7 +5,6 @@ A folder of building folders, or one building folder; a building with one
 run is passed over with a line; nothing to score stops them in one line.
 """
 
-import importlib
 import subprocess
 import sys
 
@@ -16,16 +15,6 @@ import pytest
 pytestmark = pytest.mark.skipif(not (ROBOT / 'b24').exists(),
                                 reason='robot runs not available')
 RUNS = ('b24test2', 'b24test3')
-
-
-@pytest.fixture(scope='module')
-def fusion():
-    """Return the benchmark module benchmarks/fusion.py."""
-    sys.path.insert(0, str(REPO / 'benchmarks'))
-    try:
-        return importlib.import_module('fusion')
-    finally:
-        sys.path.remove(str(REPO / 'benchmarks'))
 
 
 def building(folder, runs):

@@ -5,7 +5,10 @@ A scripted drive round surveyed_csv's building with odometry; on one side
 the scans snap to the spot where the survey ends (the robot drives 15 m
 on), and on another they jump 8 m aside for 10 s. The fused ``~/pose``
 follows odometry there, with no jump, its ellipse growing while the
-scans are not trusted; the health counts the scans trusted less.
+scans are not trusted; the health counts the scans trusted less. Scans
+5 m aside for a minute that move as the robot does (a corridor the survey
+took for another) are believed: the pose is dragged, and comes back once
+they end.
 """
 
 import math
@@ -18,30 +21,47 @@ from test_fusion_node import (Drive, health, odometry_of, RELIABLE_ODOM,
 from test_place_changes import ORIGIN
 
 
-def drive_with_holes(drive, truth, odometry, every=10):
+def snap_and_jump():
+    """
+    Return where a drive's scans say the robot is: (since, x, y) -> .
+
+    (x, y, kind): 'snap' on the first lap's second side, taken, in the
+    survey's eyes, where it ends; 'jump' for 6 s of the second lap's
+    second side, 8 m aside; '' elsewhere, where the robot is.
+    """
+    snap_from = []
+
+    def where(since, x, y):
+        if 30 <= since < 45:
+            snap_from[:] = snap_from or [x, y]
+            return (*snap_from, 'snap')
+        if 130 <= since < 136:
+            return x - 8.0, y, 'jump'
+        return x, y, ''
+    return where
+
+
+def twin(since, x, y):
+    """Scans 5 m aside from 20 to 80 s, moving as the robot does."""
+    if 20 <= since < 80:
+        return x, y - 5.0, 'twin'
+    return x, y, ''
+
+
+def drive_with_holes(drive, truth, odometry, where, every=10):
     """
     Drive ``truth``; return (true xy, fused xy, fused sd, kind) per scan.
 
-    ``kind``: 'snap' for scans of the uncovered stretch (taken, in the
-    survey's eyes, where it ends), 'jump' for scans 8 m aside, '' else.
+    Each scan is taken where ``where(since, x, y)`` says: (x, y, kind).
     """
     out = []
-    snap_from = None
     for i in range(len(truth)):
         drive.send_odometry(odometry[i])
         if i % every != every - 1 or i + 1 >= len(truth):
             continue
         drive.send_odometry(odometry[i + 1])     # covers the scan
         t, x, y, _ = truth[i]
-        since = t - truth[0, 0]
-        kind = ''
-        if 30 <= since < 45:            # the first lap's second side
-            snap_from = snap_from or (x, y)
-            sx, sy, kind = *snap_from, 'snap'
-        elif 130 <= since < 136:        # the second lap's second side
-            sx, sy, kind = x - 8.0, y, 'jump'
-        else:
-            sx, sy = x, y
+        sx, sy, kind = where(t - truth[0, 0], x, y)
         _, pose = drive.scan(t, sx, sy)
         p = pose.pose.pose.position
         cov = np.array(pose.pose.covariance).reshape(6, 6)
@@ -58,7 +78,8 @@ def test_the_pose_follows_odometry_where_the_survey_has_no_scan(
         truth = square(laps=1.8)
         # odometry without drift: the pose can follow it closely
         results = drive_with_holes(drive, truth,
-                                   odometry_of(truth, drift=0.0))
+                                   odometry_of(truth, drift=0.0),
+                                   snap_and_jump())
         true = np.array([r[0] for r in results])
         fused = np.array([r[1] for r in results])
         sd = np.array([r[2] for r in results])
@@ -77,3 +98,24 @@ def test_the_pose_follows_odometry_where_the_survey_has_no_scan(
         assert sd[snap[-1]] > sd[snap[0] - 1], sd[snap[0] - 1:snap[-1] + 1]
         assert wait_until(lambda: int(health(client)[
             'fusion_scans_off_track']) >= 5, 10, ros), health(client)
+
+
+def test_a_pose_dragged_by_a_twin_corridor_comes_back(
+        ros, tmp_path, surveyed_model):
+    with running_node(ros, tmp_path, surveyed_model,
+                      'twin_node', *RELIABLE_ODOM) as (client, proc, _):
+        drive = Drive(ros, client, 'twin_node')
+        truth = square(laps=1.2)
+        results = drive_with_holes(drive, truth,
+                                   odometry_of(truth, drift=0.0), twin)
+        true = np.array([r[0] for r in results])
+        fused = np.array([r[1] for r in results])
+        kind = np.array([r[3] for r in results])
+        error = np.linalg.norm(fused - true, axis=1)
+        after = np.flatnonzero(kind == 'twin')[-1] + 1
+        assert error[after - 1] > 3.0, error    # dragged
+        # then it only comes back: below 1 m within a minute of covered
+        # scans (one a second; 34 s today: issue 35's goal of 30 s is
+        # not met), never farther off than where the twin ended
+        assert (error[after:after + 60] < 1.0).any(), error[after:]
+        assert error[after:].max() < error[after - 1] + 0.5, error[after:]
