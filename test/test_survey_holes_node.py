@@ -42,7 +42,7 @@ def snap_and_jump():
 
 
 def twin(since, x, y):
-    """Scans 5 m aside from 20 to 80 s, moving as the robot does."""
+    """Return where a twin corridor puts the scans: 5 m aside, 20-80 s."""
     if 20 <= since < 80:
         return x, y - 5.0, 'twin'
     return x, y, ''
