@@ -30,11 +30,16 @@ def names(found):
     return [(site, [r.name for r in runs]) for site, runs in found]
 
 
-def test_a_building_folder_is_taken_as_its_parent_is(fusion, tmp_path):
+def test_a_building_folder_is_taken_as_its_parent_is(
+        fusion, tmp_path, monkeypatch):
     one = building(tmp_path / 'data' / 'b24', RUNS)
+    (tmp_path / 'data' / 'map').mkdir()         # no runs: not a building
+    (tmp_path / 'data' / 'stray.mcap').touch()  # a bag beside buildings
     expected = [('b24', list(RUNS))]
     assert names(fusion.site_runs(tmp_path / 'data', tmp_path)) == expected
     assert names(fusion.site_runs(one, tmp_path)) == expected
+    monkeypatch.chdir(one)
+    assert names(fusion.site_runs('.', tmp_path)) == expected
 
 
 def test_a_building_with_one_run_is_passed_over_with_a_line(
@@ -50,7 +55,7 @@ def test_a_building_with_one_run_is_passed_over_with_a_line(
 def test_nothing_to_score_stops_in_one_line(tmp_path, script):
     building(tmp_path / 'one' / 'b24', RUNS[:1])
     for data, why in ((tmp_path / 'one', 'no building folder with two runs'),
-                      (tmp_path / 'none', 'no such folder')):
+                      (tmp_path / 'none', 'not a folder')):
         out = tmp_path / 'out.json'
         done = subprocess.run(
             [sys.executable, REPO / 'benchmarks' / script, '--data', data,

@@ -3,10 +3,10 @@ classifier_node driving through places its survey never covered (DDS).
 
 A scripted drive round surveyed_csv's building with odometry; on one side
 the scans snap to the spot where the survey ends (the robot drives 15 m
-on), and on another they jump 8 m aside for 10 s. The fused ``~/pose``
+on), and on another they jump 8 m aside for 6 s. The fused ``~/pose``
 follows odometry there, with no jump, its ellipse growing while the
 scans are not trusted; the health counts the scans trusted less. Scans
-5 m aside for a minute that move as the robot does (a corridor the survey
+5 m off for a minute that move as the robot does (a corridor the survey
 took for another) are believed: the pose is dragged, and comes back once
 they end.
 """
@@ -23,11 +23,12 @@ from test_place_changes import ORIGIN
 
 def snap_and_jump():
     """
-    Return where a drive's scans say the robot is: (since, x, y) -> .
+    Return where a drive's scans say the robot is, by time and place.
 
-    (x, y, kind): 'snap' on the first lap's second side, taken, in the
-    survey's eyes, where it ends; 'jump' for 6 s of the second lap's
-    second side, 8 m aside; '' elsewhere, where the robot is.
+    ``where(since, x, y)`` -> (x, y, kind): 'snap' on the first lap's
+    second side, taken, in the survey's eyes, where it ends; 'jump' for
+    6 s of the second lap's second side, 8 m aside; '' elsewhere, where
+    the robot is.
     """
     snap_from = []
 
@@ -42,7 +43,7 @@ def snap_and_jump():
 
 
 def twin(since, x, y):
-    """Return where a twin corridor puts the scans: 5 m aside, 20-80 s."""
+    """Return where a twin puts the scans: 5 m off (-y), from 20 to 80 s."""
     if 20 <= since < 80:
         return x, y - 5.0, 'twin'
     return x, y, ''
@@ -105,7 +106,7 @@ def test_a_pose_dragged_by_a_twin_corridor_comes_back(
     with running_node(ros, tmp_path, surveyed_model,
                       'twin_node', *RELIABLE_ODOM) as (client, proc, _):
         drive = Drive(ros, client, 'twin_node')
-        truth = square(laps=1.2)
+        truth = square(laps=1.5)   # 150 s: a minute after the twin
         results = drive_with_holes(drive, truth,
                                    odometry_of(truth, drift=0.0), twin)
         true = np.array([r[0] for r in results])
