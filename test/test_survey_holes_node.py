@@ -106,7 +106,7 @@ def test_a_pose_dragged_by_a_twin_corridor_comes_back(
     with running_node(ros, tmp_path, surveyed_model,
                       'twin_node', *RELIABLE_ODOM) as (client, proc, _):
         drive = Drive(ros, client, 'twin_node')
-        truth = square(laps=1.5)   # 150 s: a minute after the twin
+        truth = square(laps=1.5)   # 150 s: 70 s after the twin
         results = drive_with_holes(drive, truth,
                                    odometry_of(truth, drift=0.0), twin)
         true = np.array([r[0] for r in results])
@@ -115,8 +115,9 @@ def test_a_pose_dragged_by_a_twin_corridor_comes_back(
         error = np.linalg.norm(fused - true, axis=1)
         after = np.flatnonzero(kind == 'twin')[-1] + 1
         assert error[after - 1] > 3.0, error    # dragged
-        # then it only comes back: below 1 m within a minute of covered
-        # scans (one a second; 34 s today: issue 35's goal of 30 s is
-        # not met), never farther off than where the twin ended
-        assert (error[after:after + 60] < 1.0).any(), error[after:]
+        # then it only comes back: below 1 m within 45 s of covered scans
+        # (one a second; 34 s today, 50 s with scans 2.5x wider: issue
+        # 35's goal of 30 s is not met), never farther off than where the
+        # twin ended
+        assert (error[after:after + 45] < 1.0).any(), error[after:]
         assert error[after:].max() < error[after - 1] + 0.5, error[after:]
