@@ -435,14 +435,26 @@ def coverage_line(name, survey, figures):
             f'max60 {max(r["max_after_settle_m"] for r in start):.2f}')
 
 
-def exits_line(runs):
-    """Return a line counting the hole exits of ``runs``, as the goal."""
+def exit_counts(runs):
+    """
+    Return the hole exits of ``runs``, counted as the goal has them.
+
+    All of them, those more than :data:`EXIT_FAR_M` off, and of those the
+    ones below :data:`EXIT_BACK_M` within :data:`EXIT_BACK_S`.
+    """
     exits = [e for r in runs for e in r['hole_exits']]
     far = [e for e in exits if e['error_m'] > EXIT_FAR_M]
-    back = [e for e in far if e['below_1m_after_s'] <= EXIT_BACK_S]
-    return (f'hole exits {len(exits)}, more than {EXIT_FAR_M:g} m off '
-            f'{len(far)}, of those below {EXIT_BACK_M:g} m within '
-            f'{EXIT_BACK_S:g} s {len(back)}')
+    return {'exits': len(exits), 'exits_far': len(far),
+            'exits_back': sum(e['below_1m_after_s'] <= EXIT_BACK_S
+                              for e in far)}
+
+
+def exits_line(runs):
+    """Return a line counting the hole exits of ``runs``, as the goal."""
+    n = exit_counts(runs)
+    return (f'hole exits {n["exits"]}, more than {EXIT_FAR_M:g} m off '
+            f'{n["exits_far"]}, of those below {EXIT_BACK_M:g} m within '
+            f'{EXIT_BACK_S:g} s {n["exits_back"]}')
 
 
 def summary_line(name, survey, figures):
@@ -586,13 +598,15 @@ def select(data, out):
                        'worst_max_after_60s_m': max(
                            r['max_after_settle_m'] for r in runs),
                        'ellipse_min': min(r['in_95_ellipse'] for r in runs),
-                       'ellipse_max': max(r['in_95_ellipse'] for r in runs)}
+                       'ellipse_max': max(r['in_95_ellipse'] for r in runs),
+                       **exit_counts(runs)}
                 for site, runs in per_site.items()}
             print(key, ' | '.join(
                 f'{site}: ratio {s["worst_ratio"]:.2f} p95 '
                 f'{s["worst_p95_m"]:.1f} max60 '
                 f'{s["worst_max_after_60s_m"]:.1f} ellipse '
-                f'{s["ellipse_min"]:.2f}-{s["ellipse_max"]:.2f}'
+                f'{s["ellipse_min"]:.2f}-{s["ellipse_max"]:.2f} exits '
+                f'{s["exits_back"]}/{s["exits_far"]}'
                 for site, s in summary.items()), flush=True)
     results['leave_one_building_out'] = lobo = {}
     for site in per_site:
