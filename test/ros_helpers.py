@@ -174,11 +174,19 @@ class Client:
         field = {float: 'double_value', int: 'integer_value',
                  str: 'string_value', bool: 'bool_value'}[type(value)]
         pv = ParameterValue(type=kind, **{field: value})
-        future = self.params.call_async(SetParameters.Request(
-            parameters=[Parameter(name=name, value=pv)]))
-        rclpy.spin_until_future_complete(self.node, future, timeout_sec=30)
-        assert future.done(), f'no reply to setting {name} within 30 s'
-        return future.result().results[0]
+        # resent if no reply: a request sent as the service is discovered
+        # can go unanswered (its reply path not yet matched); setting the
+        # same value twice is harmless
+        for _ in range(3):
+            future = self.params.call_async(SetParameters.Request(
+                parameters=[Parameter(name=name, value=pv)]))
+            rclpy.spin_until_future_complete(self.node, future,
+                                             timeout_sec=15)
+            if future.done():
+                return future.result().results[0]
+            self.params.remove_pending_request(future)
+        raise AssertionError(f'no reply to setting {name} in 3 tries of '
+                             f'15 s')
 
     def close(self):
         """Destroy the publisher, subscriptions and client."""
