@@ -31,7 +31,7 @@ class ScanOffsets:
 
     def __init__(self, scans):
         self.scans = int(scans)
-        self.offsets = deque(maxlen=max(self.scans, 1))
+        self.offsets = deque(maxlen=self.scans)
         self.settled = 0    # scans applied since the heading was known
         self._variance = None
 
@@ -45,16 +45,19 @@ class ScanOffsets:
         """
         Add a scan's position and the pose after it was applied.
 
-        While the heading is not known, forget them all. The variance is
-        worked out here, once per scan, not per pose asked for.
+        While the heading is not known, forget them all; with ``scans`` 0
+        keep nothing. The variance is worked out here, once per scan, not
+        per pose asked for.
         """
+        if not self.scans:
+            return
         if not heading_known:
             self.clear()
             return
         self.offsets.append(np.asarray(scan_xy, np.float64) -
                             np.asarray(pose_xy, np.float64))
         self.settled += 1
-        if self.scans and self.settled >= max(SETTLE_SCANS, self.scans):
+        if self.settled >= max(SETTLE_SCANS, self.scans):
             mean = np.mean(self.offsets, axis=0)
             self._variance = max(float(mean @ mean), LEAST_SD ** 2)
 
