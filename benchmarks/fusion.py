@@ -108,6 +108,9 @@ CANDIDATES = (
     {'wifi_outlier': 0.2},
     {'wifi_sd': 3.0},
     {'pose_scans': 0},              # the particles' spread as covariance
+    {'hindsight_s': 0.0},           # no hindsight (round 14)
+    {'hindsight_m': 2.0},
+    {'hindsight_m': 4.0},
 )
 
 

@@ -33,6 +33,10 @@ particles (a kidnapped robot: :meth:`.particles.ParticleFilter.update`),
 the filter starts afresh at the first of those scans and applies them
 again with the odometry between them (when each of them was applied with
 odometry): it restarts with their evidence, not one scan's.
+A pose dragged aside by scans from a place the survey took for another
+is moved back to a past pose of the filter carried forward by odometry
+once the recent scans agree with that one and not with it
+(:mod:`.hindsight`; counted: ``hindsight_moves``).
 Between scans the particles move up to ``move_lag`` behind the newest
 odometry. Once the filter has settled, the pose's covariance on x and y
 is how far the last ``pose_scans`` scans lie from it
@@ -47,6 +51,7 @@ import numpy as np
 
 from ..place_switch import PlaceSwitch
 from .angles import wrap
+from .hindsight import Hindsight
 from .particles import DISAGREED, ParticleFilter, UNKNOWN_VARIANCE
 from .pose_spread import ScanOffsets
 from .track_misfit import TrackMisfit
@@ -127,6 +132,9 @@ class Fusion:
         self.switch = PlaceSwitch()
         self.misfit = TrackMisfit(self.filter.params.track_s)
         self.offsets = ScanOffsets(self.filter.params.pose_scans)
+        self.hindsight = Hindsight(self.filter.params.hindsight_s,
+                                   self.filter.params.hindsight_m,
+                                   self.filter.motion)
         self.limits = limits or FusionLimits()
         self.counts = Counter()
         self.reset()
@@ -144,6 +152,7 @@ class Fusion:
         self.filter.state = None
         self.misfit.clear()     # the recent scans' track
         self.offsets.clear()    # the recent scans' offsets from the pose
+        self.hindsight.clear()  # the filter's past poses
         self.spread = 0.0       # the particles' variance at the last scan
         self.applied = deque(maxlen=self.filter.params.reset_after)
         #                         the last scans applied with odometry since
@@ -190,6 +199,7 @@ class Fusion:
         self.switch.reset()
         self.misfit.clear()
         self.offsets.clear()
+        self.hindsight.clear()
         self.applied.clear()
         self.last_scan = stamp
         self.counts['set_pose'] += 1
@@ -244,6 +254,7 @@ class Fusion:
         self.odom.clear()
         self.odom.append(pose)
         self.misfit.clear()
+        self.hindsight.clear()  # carried by the old frame's odometry
         self.applied.clear()    # their odometry poses: the old frame
         if self.anchor is not None:
             self.anchor = pose
@@ -327,7 +338,9 @@ class Fusion:
                 float(wrap(a0 + f * wrap(a1 - a0))))
 
     def _move_to(self, pose):
-        self.filter.move(*relative(self.anchor[1:], pose[1:]))
+        step = relative(self.anchor[1:], pose[1:])
+        self.filter.move(*step)
+        self.hindsight.move(*step)
         self.anchor = pose
         while len(self.odom) > 2 and self.odom[1][0] <= pose[0]:
             self.odom.popleft()
@@ -367,6 +380,7 @@ class Fusion:
         if not odometry or restart:     # the scans' track starts again
             self.misfit.clear()
             self.applied.clear()
+            self.hindsight.clear()
         if place is not None:
             misfit = self.misfit.add(stamp, xy, at[1:3]) if odometry \
                 else None
@@ -375,15 +389,20 @@ class Fusion:
             self.counts['scans_off_track'] += sensor.off_track(scan)
             if odometry:
                 self.applied.append((stamp, xy, sigma, coverage, at))
+            before = self.filter.estimate().xy if self.hindsight.kept \
+                else None
             why = self.filter.update(scan)
             if why:
                 restart = True
                 self.misfit.clear()
                 self.offsets.clear()
+                self.hindsight.clear()
                 if why == DISAGREED and \
                         len(self.applied) == self.applied.maxlen:
                     self._replay()
                 self.applied.clear()
+            elif before is not None:
+                self._look_back(stamp, xy, before)
         self.counts['restarts'] += restart
         self.last_scan = stamp
         self.counts['scans_fused' if odometry else 'scans_alone'] += 1
@@ -391,10 +410,20 @@ class Fusion:
         if place is not None:
             self.offsets.add(xy, estimate.xy,
                              estimate.cov[2, 2] < UNKNOWN_VARIANCE)
+            if odometry:
+                self.hindsight.keep(stamp, estimate, self.filter.drift(),
+                                    estimate.cov[2, 2] < UNKNOWN_VARIANCE)
         self.spread = np.trace(estimate.cov[:2, :2]) / 2
         return FusedPose(stamp, estimate.xy, estimate.yaw,
                          self._covariance(estimate), odometry, restart,
                          self.place)
+
+    def _look_back(self, stamp, xy, before):
+        """Move the particles to a past pose the last scans favour."""
+        pose = self.hindsight.check(stamp, xy, before)
+        if pose is not None:
+            self.filter.shift(pose[:2], pose[2])
+            self.counts['hindsight_moves'] += 1
 
     def _covariance(self, estimate):
         """

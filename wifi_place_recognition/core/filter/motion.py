@@ -35,13 +35,14 @@ class MotionModel:
         turned = turn * (1 + p.turn_noise * rng.standard_normal(n)) + \
             state[:, 3] * distance + \
             p.heading_noise * math.sqrt(distance) * rng.standard_normal(n)
-        heading = state[:, 2] + turned / 2
-        cos, sin = np.cos(heading), np.sin(heading)
-        state[:, 0] += scale * (forward * cos - lateral * sin)
-        state[:, 1] += scale * (forward * sin + lateral * cos)
-        state[:, 2] = wrap(state[:, 2] + turned)
+        step(state, forward, lateral, scale, turned)
         state[:, 3] += p.drift_walk * math.sqrt(distance) * \
             rng.standard_normal(n)
+
+    def carry(self, state, forward, lateral, turn):
+        """Apply one odometry step to ``state`` without noise (its drift)."""
+        step(state, forward, lateral, 1.0,
+             turn + state[:, 3] * math.hypot(forward, lateral))
 
     def spread(self, state, seconds, rng):
         """Spread ``state`` for ``seconds`` without odometry (WiFi alone)."""
@@ -50,3 +51,12 @@ class MotionModel:
             rng.standard_normal((n, 2))
         state[:, 2] = wrap(state[:, 2] + self.params.idle_turn_rate *
                            seconds * rng.standard_normal(n))
+
+
+def step(state, forward, lateral, scale, turned):
+    """Move ``state`` by a step scaled by ``scale``, turning ``turned``."""
+    heading = state[:, 2] + turned / 2
+    cos, sin = np.cos(heading), np.sin(heading)
+    state[:, 0] += scale * (forward * cos - lateral * sin)
+    state[:, 1] += scale * (forward * sin + lateral * cos)
+    state[:, 2] = wrap(state[:, 2] + turned)

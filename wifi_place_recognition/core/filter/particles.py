@@ -40,7 +40,7 @@ class FusionParams(SectionParams):
 
     SECTION = 'fusion'
     POSITIVE = ('particles', 'wifi_sd', 'wifi_outlier', 'start_sd',
-                'reset_sigmas', 'reset_after', 'track_s')
+                'reset_sigmas', 'reset_after', 'track_s', 'hindsight_m')
     SIGNED = ('drift_mean',)
 
     particles: int = 3000
@@ -65,6 +65,10 @@ class FusionParams(SectionParams):
     pose_scans: int = 10              # the pose's covariance from the last
     #                                   so many scans' offsets (0: the
     #                                   particles' spread; .pose_spread)
+    hindsight_s: float = 120.0        # s: past poses kept, carried by
+    #                                   odometry (0: none; .hindsight)
+    hindsight_m: float = 3.0          # m: the scans' mean offset from the
+    #                                   pose from which one of them can win
     fit: dict = None                  # how they were chosen (free-form)
 
     def __post_init__(self):
@@ -197,6 +201,26 @@ class ParticleFilter:
         if 1.0 / (self.weight ** 2).sum() < len(self.weight) / 2:
             self._resample()
         return ''
+
+    def shift(self, xy, yaw):
+        """
+        Move the cloud rigidly so that its pose is ``xy``, ``yaw``.
+
+        Turned about its pose and carried there, its weights and spread
+        kept (:mod:`.hindsight`).
+        """
+        estimate = self.estimate()
+        turn = float(wrap(yaw - estimate.yaw))
+        c, s = math.cos(turn), math.sin(turn)
+        d = self.state[:, :2] - estimate.xy
+        self.state[:, 0] = xy[0] + c * d[:, 0] - s * d[:, 1]
+        self.state[:, 1] = xy[1] + s * d[:, 0] + c * d[:, 1]
+        self.state[:, 2] = wrap(self.state[:, 2] + turn)
+        self.disagreeing = 0
+
+    def drift(self):
+        """Return the mean heading drift of the particles (rad per m)."""
+        return float(self.weight @ self.state[:, 3])
 
     def _resample(self):
         """Low-variance resampling."""

@@ -35,6 +35,7 @@ HEALTH_NAMES = {'odometry': 'odometry_received',
                 'scans_without_position': 'fusion_scans_without_position',
                 'restarts': 'fusion_restarts',
                 'scans_replayed': 'fusion_scans_replayed',
+                'hindsight_moves': 'fusion_hindsight_moves',
                 'set_pose': 'fusion_set_pose',
                 'scans_before_set_pose': 'fusion_scans_before_set_pose'}
 #: Scans kept waiting for odometry at most (more: the oldest forgotten).
