@@ -3,12 +3,13 @@ Hindsight without ROS: the filter's past poses carried by odometry.
 
 A kept pose moves with odometry exactly (no noise, its drift turning
 it); it wins only when the last scans agree with it and lie far from the
-filter, and is not kept before the heading has settled; the cloud moves
-there rigidly. Through :class:`Fusion`: a scripted drive whose scans lie
+filter, and is not kept before the heading has settled, nor with a drift
+not known (not fitted); the cloud moves there rigidly. Through :class:`Fusion`: a scripted drive whose scans lie
 5 m aside for a minute (a twin corridor) drags the pose; once they end,
 the pose is back within seconds, not the half minute it takes without.
 """
 
+from dataclasses import replace
 import math
 
 import numpy as np
@@ -22,6 +23,15 @@ from wifi_place_recognition.core.filter.particles import (
     Estimate, FusionParams, ParticleFilter)
 from wifi_place_recognition.core.filter.pose_spread import SETTLE_SCANS
 
+#: A drift known as fit_odometry writes it.
+FITTED = FusionParams(drift_sd=0.005)
+
+
+def hindsight(**change):
+    """Return a Hindsight with FITTED's parameters changed."""
+    params = replace(FITTED, **change)
+    return Hindsight(params, MotionModel(params))
+
 
 def estimate(x, y, yaw=0.0, yaw_sd=0.05):
     """Return an :class:`Estimate` at x, y heading ``yaw``."""
@@ -31,7 +41,7 @@ def estimate(x, y, yaw=0.0, yaw_sd=0.05):
 
 def settled(keep_s=120.0, drift=0.0):
     """Return a Hindsight that kept the pose (0, 0, east) at t = 0."""
-    h = Hindsight(keep_s, 3.0, MotionModel(FusionParams()))
+    h = hindsight(hindsight_s=keep_s)
     for k in range(SETTLE_SCANS):
         h.keep(k - SETTLE_SCANS + 1.0, estimate(0, 0), drift, True)
     assert len(h.kept) == 1 and h.kept[0].stamp == 0.0
@@ -50,7 +60,7 @@ def test_a_kept_pose_moves_with_odometry_exactly():
 
 
 def test_not_kept_before_the_heading_settled_or_while_it_is_vague():
-    h = Hindsight(120.0, 3.0, MotionModel(FusionParams()))
+    h = hindsight()
     for k in range(SETTLE_SCANS - 1):
         h.keep(float(k), estimate(0, 0), 0.0, True)
     assert h.kept == []
@@ -59,10 +69,10 @@ def test_not_kept_before_the_heading_settled_or_while_it_is_vague():
     h.keep(101.0, estimate(0, 0), 0.0, False)   # lost: count again
     h.keep(102.0, estimate(0, 0), 0.0, True)
     assert h.kept == []
-    off = Hindsight(0.0, 3.0, MotionModel(FusionParams()))    # off
-    for k in range(2 * SETTLE_SCANS):
-        off.keep(float(k), estimate(0, 0), 0.0, True)
-    assert off.kept == []
+    for off in (hindsight(hindsight_s=0.0), hindsight(drift_sd=0.04)):
+        for k in range(2 * SETTLE_SCANS):
+            off.keep(float(k), estimate(0, 0), 0.0, True)
+        assert off.kept == []
 
 
 def scans_at(h, start, scan_xy, filter_xy, n=SCANS):
@@ -140,21 +150,22 @@ def twin_drive(params, start=40.0, end=100.0, laps=1.7):
 
 
 def test_a_pose_dragged_by_a_twin_is_moved_back_to_where_odometry_says():
-    errors, twin, fusion = twin_drive(FusionParams())
+    errors, twin, fusion = twin_drive(FITTED)
     after = np.flatnonzero(twin)[-1] + 1
     assert errors[after - 1] > 4.0, errors      # dragged
     assert fusion.counts['hindsight_moves'] == 1
     # back within 2 m 5 s after the twin ends; 15 s without hindsight
     assert errors[after:after + 5].min() < 2.0, errors[after:]
     assert errors[after + 5:].max() < 2.0, errors[after:]
-    errors, _, fusion = twin_drive(FusionParams(hindsight_s=0))
-    assert fusion.counts['hindsight_moves'] == 0
-    assert errors[after:after + 10].min() > 2.0, errors[after:]
+    for params in (replace(FITTED, hindsight_s=0), FusionParams()):
+        errors, _, fusion = twin_drive(params)      # off; drift not known
+        assert fusion.counts['hindsight_moves'] == 0
+        assert errors[after:after + 10].min() > 2.0, errors[after:]
 
 
 def test_no_pose_to_go_back_to_when_the_twin_comes_before_the_heading():
-    # from 20 s on, before the heading settled: every pose kept is dragged
-    errors, twin, fusion = twin_drive(FusionParams(), 20.0, 80.0, 1.5)
+    # from 10 s on, before the heading settled: every pose kept is dragged
+    errors, twin, fusion = twin_drive(FITTED, 10.0, 70.0, 1.5)
     assert fusion.counts['hindsight_moves'] == 0
 
 

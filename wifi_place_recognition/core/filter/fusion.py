@@ -35,8 +35,8 @@ again with the odometry between them (when each of them was applied with
 odometry): it restarts with their evidence, not one scan's.
 A pose dragged aside by scans from a place the survey took for another
 is moved back to a past pose of the filter carried forward by odometry
-once the recent scans agree with that one and not with it
-(:mod:`.hindsight`; counted: ``hindsight_moves``).
+once the recent scans that testify agree with that one and not with it
+(:mod:`.hindsight`, with a fitted drift; counted: ``hindsight_moves``).
 Between scans the particles move up to ``move_lag`` behind the newest
 odometry. Once the filter has settled, the pose's covariance on x and y
 is how far the last ``pose_scans`` scans lie from it
@@ -132,9 +132,7 @@ class Fusion:
         self.switch = PlaceSwitch()
         self.misfit = TrackMisfit(self.filter.params.track_s)
         self.offsets = ScanOffsets(self.filter.params.pose_scans)
-        self.hindsight = Hindsight(self.filter.params.hindsight_s,
-                                   self.filter.params.hindsight_m,
-                                   self.filter.motion)
+        self.hindsight = Hindsight(self.filter.params, self.filter.motion)
         self.limits = limits or FusionLimits()
         self.counts = Counter()
         self.reset()
@@ -389,8 +387,8 @@ class Fusion:
             self.counts['scans_off_track'] += sensor.off_track(scan)
             if odometry:
                 self.applied.append((stamp, xy, sigma, coverage, at))
-            before = self.filter.estimate().xy if self.hindsight.kept \
-                else None
+            before = self.filter.estimate().xy if self.hindsight.kept and \
+                sensor.testifies(scan) else None
             why = self.filter.update(scan)
             if why:
                 restart = True

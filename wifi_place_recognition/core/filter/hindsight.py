@@ -10,8 +10,9 @@ tells them apart is history: the pose the filter had before the drag,
 carried forward by odometry, is where the robot is when the scans agree
 with it again.
 
-:class:`Hindsight` keeps such poses, one every :data:`EVERY_S` seconds
-once the heading has been known for :data:`.pose_spread.SETTLE_SCANS`
+:class:`Hindsight` keeps such poses (only when the odometry's heading
+drift is known: a prior of at most :data:`MAX_DRIFT_SD`, as
+``fit_odometry`` writes), one every :data:`EVERY_S` seconds once the heading has been known for :data:`.pose_spread.SETTLE_SCANS`
 scans in a row and while its standard deviation is at most
 :data:`MAX_YAW_SD`, for ``hindsight_s`` seconds, each moved by the
 odometry steps the particles move by (with the particles' mean heading
@@ -32,6 +33,11 @@ import numpy as np
 
 from .pose_spread import SETTLE_SCANS
 
+#: Poses are kept only with a drift prior this narrow (rad per m;
+#: ``fit_odometry`` writes 0.005, the default 0.04 is a drift not known):
+#: a pose carried with a drift not yet learned goes astray, and scans
+#: biased the same way for seconds can then agree with it.
+MAX_DRIFT_SD = 0.01
 #: A pose is kept every so many seconds (s).
 EVERY_S = 10.0
 #: ... while the filter's heading is known to this standard deviation.
@@ -64,14 +70,17 @@ class Hindsight:
     """
     Past poses of the filter, and the one the recent scans favour.
 
-    ``keep_s``: how long a pose is kept (s; 0: none, hindsight off);
-    ``offset_m``: the filter's mean offset from the scans from which a
-    kept pose can win; ``motion``: the filter's :class:`.motion.MotionModel`.
+    ``params``: the filter's :class:`.particles.FusionParams`
+    (``hindsight_s``: how long a pose is kept, 0: none; ``hindsight_m``:
+    the filter's mean offset from the scans from which a kept pose can
+    win; ``drift_sd``: none kept above :data:`MAX_DRIFT_SD`); ``motion``:
+    the filter's :class:`.motion.MotionModel`.
     """
 
-    def __init__(self, keep_s, offset_m, motion):
-        self.keep_s = float(keep_s)
-        self.offset_m = float(offset_m)
+    def __init__(self, params, motion):
+        self.keep_s = float(params.hindsight_s) \
+            if params.drift_sd <= MAX_DRIFT_SD else 0.0
+        self.offset_m = float(params.hindsight_m)
         self.motion = motion
         self.clear()
 
