@@ -4,9 +4,10 @@ Hindsight without ROS: the filter's past poses carried by odometry.
 A kept pose moves with odometry exactly (no noise, its drift turning
 it); it wins only when the last scans agree with it and lie far from the
 filter, and is not kept before the heading has settled, nor with a drift
-not known (not fitted); the cloud moves there rigidly. Through :class:`Fusion`: a scripted drive whose scans lie
-5 m aside for a minute (a twin corridor) drags the pose; once they end,
-the pose is back within seconds, not the half minute it takes without.
+not known (not fitted); the cloud moves there rigidly. Through
+:class:`Fusion`: a scripted drive whose scans lie 5 m aside for a minute
+(a twin corridor) drags the pose; once they end, the pose is back within
+seconds, not the half minute it takes without.
 """
 
 from dataclasses import replace

@@ -10,19 +10,20 @@ tells them apart is history: the pose the filter had before the drag,
 carried forward by odometry, is where the robot is when the scans agree
 with it again.
 
-:class:`Hindsight` keeps such poses (only when the odometry's heading
-drift is known: a prior of at most :data:`MAX_DRIFT_SD`, as
-``fit_odometry`` writes), one every :data:`EVERY_S` seconds once the heading has been known for :data:`.pose_spread.SETTLE_SCANS`
-scans in a row and while its standard deviation is at most
-:data:`MAX_YAW_SD`, for ``hindsight_s`` seconds, each moved by the
-odometry steps the particles move by (with the particles' mean heading
-drift, no noise). At each scan it compares the last :data:`SCANS` scans'
-mean offset from the filter's position (before each was applied) with
-their mean offset from each kept pose: when the filter's is longer than
+:class:`Hindsight` keeps such poses when the odometry's heading drift
+is known (a prior of at most :data:`MAX_DRIFT_SD`, as ``fit_odometry``
+writes): one every :data:`EVERY_S` seconds once the heading has been
+known for :data:`.pose_spread.SETTLE_SCANS` scans in a row and while its
+standard deviation is at most :data:`MAX_YAW_SD`, for ``hindsight_s``
+seconds, each moved by the odometry steps the particles move by (with
+the particles' mean heading drift, no noise). At each scan that
+testifies it compares the last :data:`SCANS` such scans' mean offset
+from the filter's position (before each was applied) with their mean
+offset from each kept pose: when the filter's is longer than
 ``hindsight_m`` and a pose kept at least :data:`MIN_AGE_S` ago, at least
 :data:`MIN_MOVE_M` away, has at most :data:`RATIO` of it, the filter
 moves there (to the oldest such pose; the poses kept after it are
-dropped, the older compared anew) (ROS-free).
+dropped, the older compared anew). ROS-free.
 """
 
 from collections import deque
