@@ -4,7 +4,8 @@ Hindsight without ROS: the filter's past poses carried by odometry.
 A kept pose moves with odometry exactly (no noise, its drift turning
 it); it wins only when the last scans agree with it and lie far from the
 filter, and is not kept before the heading has settled, nor with a drift
-not known (not fitted); the cloud moves there rigidly. Through
+not known (not fitted) or scans weighed by coverage; the cloud moves
+there rigidly. Through
 :class:`Fusion`: a scripted drive whose scans lie 5 m aside for a minute
 (a twin corridor) drags the pose; once they end, the pose is back within
 seconds, not the half minute it takes without.
@@ -70,7 +71,8 @@ def test_not_kept_before_the_heading_settled_or_while_it_is_vague():
     h.keep(101.0, estimate(0, 0), 0.0, False)   # lost: count again
     h.keep(102.0, estimate(0, 0), 0.0, True)
     assert h.kept == []
-    for off in (hindsight(hindsight_s=0.0), hindsight(drift_sd=0.04)):
+    for off in (hindsight(hindsight_s=0.0), hindsight(drift_sd=0.04),
+                hindsight(coverage_full=0.5)):
         for k in range(2 * SETTLE_SCANS):
             off.keep(float(k), estimate(0, 0), 0.0, True)
         assert off.kept == []

@@ -35,8 +35,9 @@ again with the odometry between them (when each of them was applied with
 odometry): it restarts with their evidence, not one scan's.
 A pose dragged aside by scans from a place the survey took for another
 is moved back to a past pose of the filter carried forward by odometry
-once the recent scans that testify agree with that one and not with it
-(:mod:`.hindsight`, with a fitted drift; counted: ``hindsight_moves``).
+once the recent scans agree with that one and not with it
+(:mod:`.hindsight`: with a fitted drift, every scan believed; counted:
+``hindsight_moves``).
 Between scans the particles move up to ``move_lag`` behind the newest
 odometry. Once the filter has settled, the pose's covariance on x and y
 is how far the last ``pose_scans`` scans lie from it
@@ -387,8 +388,8 @@ class Fusion:
             self.counts['scans_off_track'] += sensor.off_track(scan)
             if odometry:
                 self.applied.append((stamp, xy, sigma, coverage, at))
-            before = self.filter.estimate().xy if self.hindsight.kept and \
-                sensor.testifies(scan) else None
+            before = self.filter.estimate().xy if self.hindsight.kept \
+                else None
             why = self.filter.update(scan)
             if why:
                 restart = True

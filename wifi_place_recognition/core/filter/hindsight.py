@@ -12,18 +12,21 @@ with it again.
 
 :class:`Hindsight` keeps such poses when the odometry's heading drift
 is known (a prior of at most :data:`MAX_DRIFT_SD`, as ``fit_odometry``
-writes): one every :data:`EVERY_S` seconds once the heading has been
-known for :data:`.pose_spread.SETTLE_SCANS` scans in a row and while its
-standard deviation is at most :data:`MAX_YAW_SD`, for ``hindsight_s``
-seconds, each moved by the odometry steps the particles move by (with
-the particles' mean heading drift, no noise). At each scan that
-testifies it compares the last :data:`SCANS` such scans' mean offset
-from the filter's position (before each was applied) with their mean
-offset from each kept pose: when the filter's is longer than
-``hindsight_m`` and a pose kept at least :data:`MIN_AGE_S` ago, at least
-:data:`MIN_MOVE_M` away, has at most :data:`RATIO` of it, the filter
-moves there (to the oldest such pose; the poses kept after it are
-dropped, the older compared anew). ROS-free.
+writes) and every scan is believed (``coverage_full`` 0, the default;
+with scans weighed by coverage, those off the survey no longer drag the
+pose, the filter crosses a hole on odometry, and scans still biased at
+the hole's edge agreed with a past pose gone astray): one every
+:data:`EVERY_S` seconds once the heading has been known for
+:data:`.pose_spread.SETTLE_SCANS` scans in a row and while its standard
+deviation is at most :data:`MAX_YAW_SD`, for ``hindsight_s`` seconds,
+each moved by the odometry steps the particles move by (with the
+particles' mean heading drift, no noise). At each scan it compares the
+last :data:`SCANS` scans' mean offset from the filter's position (before
+each was applied) with their mean offset from each kept pose: when the
+filter's is longer than ``hindsight_m`` and a pose kept at least
+:data:`MIN_AGE_S` ago, at least :data:`MIN_MOVE_M` away, has at most
+:data:`RATIO` of it, the filter moves there (to the oldest such pose;
+the poses kept after it are dropped, the older compared anew). ROS-free.
 """
 
 from collections import deque
@@ -74,13 +77,15 @@ class Hindsight:
     ``params``: the filter's :class:`.particles.FusionParams`
     (``hindsight_s``: how long a pose is kept, 0: none; ``hindsight_m``:
     the filter's mean offset from the scans from which a kept pose can
-    win; ``drift_sd``: none kept above :data:`MAX_DRIFT_SD`); ``motion``:
-    the filter's :class:`.motion.MotionModel`.
+    win; none kept with ``drift_sd`` above :data:`MAX_DRIFT_SD` or
+    ``coverage_full`` above 0); ``motion``: the filter's
+    :class:`.motion.MotionModel`.
     """
 
     def __init__(self, params, motion):
-        self.keep_s = float(params.hindsight_s) \
-            if params.drift_sd <= MAX_DRIFT_SD else 0.0
+        self.keep_s = float(params.hindsight_s) if \
+            params.drift_sd <= MAX_DRIFT_SD and not params.coverage_full \
+            else 0.0
         self.offset_m = float(params.hindsight_m)
         self.motion = motion
         self.clear()
