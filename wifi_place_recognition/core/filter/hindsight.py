@@ -38,7 +38,8 @@ import numpy as np
 from .pose_spread import SETTLE_SCANS
 
 #: Poses are kept only with a drift prior this narrow (rad per m;
-#: ``fit_odometry`` writes 0.005, the default 0.04 is a drift not known):
+#: ``fit_odometry`` writes its fit's standard error, at least 0.005, 0.005
+#: on the shared runs; the default 0.04 is a drift not known):
 #: a pose carried with a drift not yet learned goes astray, and scans
 #: biased the same way for seconds can then agree with it.
 MAX_DRIFT_SD = 0.01
