@@ -92,7 +92,7 @@ def test_a_kept_pose_wins_when_the_scans_agree_with_it_not_the_filter():
     # the scans say (0.5, 0): near the kept pose, 5 m from the filter
     assert scans_at(h, 60.0, (0.5, 0.0), (0.5, 5.0)) == pytest.approx(
         (0.0, 0.0, 0.0))
-    assert h.kept == []         # all start again after a win
+    assert h.kept == []         # it and the younger are dropped
     # scans near the filter: no win
     h = settled()
     assert scans_at(h, 60.0, (0.5, 4.0), (0.5, 5.0)) is None
@@ -111,6 +111,22 @@ def test_a_kept_pose_wins_when_the_scans_agree_with_it_not_the_filter():
     h = settled(keep_s=30.0)
     assert scans_at(h, 60.0, (0.5, 0.0), (0.5, 5.0)) is None
     assert h.kept == []
+
+
+def test_the_oldest_pose_wins_and_the_older_ones_are_compared_anew():
+    h = settled()                               # (0, 0), kept at 0 s
+    h.keep(10.0, estimate(0, 3), 0.0, True)     # (0, 3), kept at 10 s
+    h.keep(20.0, estimate(0, 3.2), 0.0, True)   # (0, 3.2), kept at 20 s
+    assert [k.stamp for k in h.kept] == [0.0, 10.0, 20.0]
+    # the scans agree with both younger poses, not with (0, 0): the one
+    # kept at 10 s wins, the one kept after it goes, the older stays
+    assert scans_at(h, 60.0, (0.0, 3.5), (0.0, 8.0)) == pytest.approx(
+        (0.0, 3.0, 0.0))
+    assert [k.stamp for k in h.kept] == [0.0]
+    assert len(h.kept[0].offsets) == 0          # compared anew
+    # once the scans agree with it (and not with the moved pose), it wins
+    assert scans_at(h, 70.0, (0.0, 0.5), (0.0, 4.0)) == pytest.approx(
+        (0.0, 0.0, 0.0))
 
 
 def test_the_cloud_moves_rigidly_to_a_pose():
