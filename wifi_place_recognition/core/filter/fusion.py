@@ -388,8 +388,8 @@ class Fusion:
             self.counts['scans_off_track'] += sensor.off_track(scan)
             if odometry:
                 self.applied.append((stamp, xy, sigma, coverage, at))
-            before = self.filter.estimate().xy if self.hindsight.kept \
-                else None
+            before = self.filter.estimate().xy if \
+                self.hindsight.stamps.size else None
             why = self.filter.update(scan)
             if why:
                 restart = True

@@ -29,8 +29,6 @@ filter's is longer than ``hindsight_m`` and a pose kept at least
 the poses kept after it are dropped, the older compared anew). ROS-free.
 """
 
-from collections import deque
-from dataclasses import dataclass, field
 import math
 
 import numpy as np
@@ -57,20 +55,6 @@ RATIO = 0.6
 MIN_MOVE_M = 2.0
 
 
-def _offsets():
-    return deque(maxlen=SCANS)
-
-
-@dataclass
-class Kept:
-    """One past pose carried forward, and the last scans' offsets."""
-
-    stamp: float
-    state: np.ndarray                          # (1, 4): x, y, yaw, drift
-    offsets: deque = field(default_factory=_offsets)          # from it
-    filter_offsets: deque = field(default_factory=_offsets)   # the filter's
-
-
 class Hindsight:
     """
     Past poses of the filter, and the one the recent scans favour.
@@ -93,14 +77,19 @@ class Hindsight:
 
     def clear(self):
         """Forget the kept poses (the filter started afresh, or moved)."""
-        self.kept = []
+        self.stamps = np.empty(0)           # when each pose was kept
+        self.state = np.empty((0, 4))       # each, carried: x, y, yaw, drift
+        self.offsets = np.empty((0, SCANS, 2))  # the last scans' from each
+        self.seen = np.empty(0, int)        # scans compared since kept
+        self.filter_offsets = np.zeros((SCANS, 2))  # theirs from the filter
+        self.slot = 0                       # where the next scan's go
         self.last = None    # when the last pose was kept
         self.known = 0      # scans in a row with the heading known
 
     def move(self, forward, lateral, turn):
         """Carry every kept pose by one odometry step."""
-        for kept in self.kept:
-            self.motion.carry(kept.state, forward, lateral, turn)
+        if self.stamps.size:
+            self.motion.carry(self.state, forward, lateral, turn)
 
     def keep(self, stamp, estimate, drift, heading_known):
         """
@@ -115,9 +104,18 @@ class Hindsight:
                 estimate.cov[2, 2] > MAX_YAW_SD ** 2 or \
                 (self.last is not None and stamp - self.last < EVERY_S):
             return
-        self.kept.append(Kept(stamp, np.array(
-            [[estimate.xy[0], estimate.xy[1], estimate.yaw, drift]])))
+        self.stamps = np.append(self.stamps, stamp)
+        self.state = np.vstack([self.state, [*estimate.xy, estimate.yaw,
+                                             drift]])
+        self.offsets = np.concatenate([self.offsets,
+                                       np.zeros((1, SCANS, 2))])
+        self.seen = np.append(self.seen, 0)
         self.last = stamp
+
+    def _keep_only(self, rows):
+        self.stamps, self.state, self.offsets, self.seen = (
+            a[rows] for a in (self.stamps, self.state, self.offsets,
+                              self.seen))
 
     def check(self, stamp, xy, before):
         """
@@ -130,21 +128,23 @@ class Hindsight:
         compared anew (one may win once the scans of the drag have left
         their window). Poses older than ``keep_s`` are dropped.
         """
-        self.kept = [k for k in self.kept if stamp - k.stamp <= self.keep_s]
-        for i, kept in enumerate(self.kept):    # the oldest first
-            kept.offsets.append(xy - kept.state[0, :2])
-            kept.filter_offsets.append(xy - before)
-            if stamp - kept.stamp < MIN_AGE_S or len(kept.offsets) < SCANS:
-                continue
-            own = math.hypot(*np.mean(kept.filter_offsets, axis=0))
-            theirs = math.hypot(*np.mean(kept.offsets, axis=0))
-            away = math.hypot(*(kept.state[0, :2] - before))
-            if own > self.offset_m and theirs <= RATIO * own and \
-                    away >= MIN_MOVE_M:
-                self.kept = self.kept[:i]   # kept before it: compared anew
-                for older in self.kept:
-                    older.offsets.clear()
-                    older.filter_offsets.clear()
-                self.last = stamp
-                return tuple(float(v) for v in kept.state[0, :3])
-        return None
+        self._keep_only(stamp - self.stamps <= self.keep_s)
+        if not self.stamps.size:
+            return None
+        self.offsets[:, self.slot] = xy - self.state[:, :2]
+        self.filter_offsets[self.slot] = xy - before
+        self.slot = (self.slot + 1) % SCANS
+        self.seen += 1
+        own = math.hypot(*self.filter_offsets.mean(axis=0))
+        theirs = np.hypot(*self.offsets.mean(axis=1).T)
+        away = np.hypot(*(self.state[:, :2] - before).T)
+        wins = (stamp - self.stamps >= MIN_AGE_S) & (self.seen >= SCANS) & \
+            (theirs <= RATIO * own) & (away >= MIN_MOVE_M)
+        if own <= self.offset_m or not wins.any():
+            return None
+        i = int(np.argmax(wins))            # the oldest
+        pose = tuple(float(v) for v in self.state[i, :3])
+        self._keep_only(slice(0, i))        # kept before it: compared anew
+        self.seen[:] = 0
+        self.last = stamp
+        return pose
