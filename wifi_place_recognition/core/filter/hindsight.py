@@ -76,12 +76,12 @@ class Hindsight:
         self.clear()
 
     def clear(self):
-        """Forget the kept poses (the filter started afresh, or moved)."""
+        """Forget the kept poses (the filter started afresh)."""
         self.stamps = np.empty(0)           # when each pose was kept
         self.state = np.empty((0, 4))       # each, carried: x, y, yaw, drift
         self.offsets = np.empty((0, SCANS, 2))  # the last scans' from each
         self.seen = np.empty(0, int)        # scans compared since kept
-        self.filter_offsets = np.zeros((SCANS, 2))  # theirs from the filter
+        self.filter_offsets = np.zeros((SCANS, 2))  # the same, the filter's
         self.slot = 0                       # where the next scan's go
         self.last = None    # when the last pose was kept
         self.known = 0      # scans in a row with the heading known
