@@ -409,7 +409,7 @@ class Fusion:
         if place is not None:
             self.offsets.add(xy, estimate.xy,
                              estimate.cov[2, 2] < UNKNOWN_VARIANCE)
-            if odometry:
+            if odometry and self.hindsight.keep_s:     # hindsight on
                 self.hindsight.keep(stamp, estimate, self.filter.drift(),
                                     estimate.cov[2, 2] < UNKNOWN_VARIANCE)
         self.spread = np.trace(estimate.cov[:2, :2]) / 2

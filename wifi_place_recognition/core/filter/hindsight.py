@@ -128,7 +128,8 @@ class Hindsight:
         compared anew (one may win once the scans of the drag have left
         their window). Poses older than ``keep_s`` are dropped.
         """
-        self._keep_only(stamp - self.stamps <= self.keep_s)
+        if self.stamps.size and stamp - self.stamps[0] > self.keep_s:
+            self._keep_only(stamp - self.stamps <= self.keep_s)  # in order
         if not self.stamps.size:
             return None
         self.offsets[:, self.slot] = xy - self.state[:, :2]
