@@ -11,7 +11,9 @@ import math
 
 import numpy as np
 from wifi_place_recognition.core.filter.fusion import Fusion
-from wifi_place_recognition.core.filter.particles import FusionParams
+from wifi_place_recognition.core.filter.particles import (DISAGREED,
+                                                          FusionParams,
+                                                          ParticleFilter)
 from wifi_place_recognition.core.filter.sensor import (WifiPosition,
                                                        WifiSensorModel)
 from wifi_place_recognition.core.filter.track_misfit import TrackMisfit
@@ -168,3 +170,39 @@ def test_an_odometry_jump_starts_the_scans_track_again():
         off.append(fusion.counts['scans_off_track'])
     assert fusion.counts['odometry_jump'] == 1
     assert off[1] <= off[0] + 5, off     # the scans' noise alone: off[0]
+
+
+def test_with_reset_track_sigmas_a_scan_on_track_disagrees_sooner():
+    """
+    Scans on track disagree from ``reset_track_sigmas`` sd (an option).
+
+    A robot carried about a scan's 3 sd (12 m): its scans, once they move
+    as odometry says (their misfit widens them no more), disagree from 2
+    sd; ten in a row restart the filter there. Scans widened by their
+    misfit (snapped from a hole) still need 3, as every scan does by
+    default (0).
+    """
+    params = FusionParams(reset_track_sigmas=2.0)
+    sensor = WifiSensorModel(params)
+    cov = np.eye(2) * 1.0       # the particles: 1 m spread
+    on = WifiPosition(np.array([11.0, 0.0]), misfit=1.0)
+    off = WifiPosition(np.array([11.0, 0.0]), misfit=3.0)    # widened
+    unknown = WifiPosition(np.array([11.0, 0.0]))   # no track yet
+    assert not sensor.off_track(on) and sensor.off_track(off)
+    assert sensor.disagrees(np.zeros(2), cov, on)
+    assert not sensor.disagrees(np.zeros(2), cov, off)
+    assert not sensor.disagrees(np.zeros(2), cov, unknown)
+    assert FusionParams().reset_track_sigmas == 0
+    assert not WifiSensorModel(FusionParams()).disagrees(np.zeros(2), cov,
+                                                         on)
+    # within 2 sd (8.2 m here) a scan on track agrees
+    assert not sensor.disagrees(np.zeros(2), cov, WifiPosition(
+        np.array([7.5, 0.0]), misfit=1.0))
+    # as far as 3 sd, any scan disagrees
+    assert sensor.disagrees(np.zeros(2), cov, WifiPosition(
+        np.array([13.0, 0.0]), misfit=3.0))
+    pf = ParticleFilter(params, seed=0)
+    pf.start(np.zeros(2), sd=0.5)
+    why = [pf.update(on) for _ in range(params.reset_after)]
+    assert why[-1] == DISAGREED and not any(why[:-1])
+    assert np.linalg.norm(pf.position()[0] - on.xy) < 1.0

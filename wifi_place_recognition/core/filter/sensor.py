@@ -81,15 +81,24 @@ class WifiSensorModel:
 
         ``xy``, ``cov``: the particles' mean position and its covariance.
         With the scan's width before its misfit: scans that jump away from
-        odometry for good (a kidnapped robot) keep disagreeing.
+        odometry for good (a kidnapped robot) keep disagreeing. With
+        ``reset_track_sigmas`` > 0 a scan whose misfit did not widen it
+        (the recent scans move as odometry says) disagrees from that many
+        sd: a robot carried about a scan's 3 sd (12 m) is found sooner,
+        but so are the scans of a hole beside a parallel surveyed stretch,
+        which move as odometry says too (off by default).
         """
         if not self.testifies(scan):
             return False
+        p = self.params
         width = self.width(replace(scan, misfit=None))
         cov = cov + np.eye(2) * width ** 2
         delta = scan.xy - xy
-        return delta @ np.linalg.solve(cov, delta) > \
-            self.params.reset_sigmas ** 2
+        limit = p.reset_sigmas
+        if p.reset_track_sigmas and scan.misfit is not None and \
+                not self.off_track(scan):
+            limit = min(limit, p.reset_track_sigmas)
+        return delta @ np.linalg.solve(cov, delta) > limit ** 2
 
     def trust(self, scan):
         """
