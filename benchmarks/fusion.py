@@ -25,7 +25,9 @@ start: 0.5 m and 10 degrees) instead of starting from the first scan
 with every heading. Also: a
 kidnapped robot (two runs spliced, the odometry continuous, the true
 position jumping) and the recovery time (the error below 2 m for 10 s
-in a row), per survey. And leaving a hole (:func:`hole_exits`): where
+in a row), per survey; on every run, how near the filter came to a
+restart (the most scans in a row that disagreed). And leaving a hole
+(:func:`hole_exits`): where
 the robot comes back to covered ground for at least 30 s after at least
 10 scans in a hole, how far off the pose is, and how long until it is
 below 1 m.
@@ -219,15 +221,18 @@ def detector_figures(coverage, hole, ok):
 
 def localise(params, odometry, stamps, single, seed, start=None):
     """
-    Return the fused (xy, yaw, cov) at every scan.
+    Return the fused (xy, yaw, cov) at every scan, and the margin.
 
-    ``start``: (stamp, xy, yaw) set on the filter first (``set_pose``,
-    :data:`SET_START_SD`); None: the filter starts from the first scan.
+    The margin: the most scans in a row that disagreed with the filter
+    (``reset_after`` restart it). ``start``: (stamp, xy, yaw) set on the
+    filter first (``set_pose``, :data:`SET_START_SD`); None: the filter
+    starts from the first scan.
     """
     fusion = Fusion(params, seed=seed)
     if start is not None:
         fusion.set_pose(*start, *SET_START_SD, (0, 0))
-    return fuse_offline(odometry, (stamps, *single), fusion)
+    return (*fuse_offline(odometry, (stamps, *single), fusion),
+            fusion.filter.most_disagreeing)
 
 
 def in_holes(test, kept):
@@ -260,14 +265,15 @@ def fused_figures(test, single, params, hole, seeds=SEEDS, start=False):
         at = np.flatnonzero(np.isfinite(test.xy).all(axis=1))[0]
         start = (test.stamps[at], test.xy[at], test.yaw[at])
     for seed in seeds:
-        xy, yaw, cov = localise(params, test.odometry, test.stamps, single,
-                                seed, start or None)
+        xy, yaw, cov, most = localise(params, test.odometry, test.stamps,
+                                      single, seed, start or None)
         s = score(test.stamps, test.xy, xy, test.yaw, yaw, cov,
                   settle_s=SETTLE_S)
         error = np.linalg.norm(xy - test.xy, axis=1)
         s['hole_mean_m'] = float(np.nanmean(error[hole])) if hole.any() \
             else math.nan
         s['hole_exits'] = hole_exits(test.stamps, error, hole)
+        s['most_disagreeing_in_a_row'] = most
         runs.append(s)
         first = xy if first is None else first
     return runs, first
@@ -703,6 +709,12 @@ def main():
     print('every pair, survey and seed, fitted: ' + exits_line(
         [r for key in ('pairs', 'holes') for f in results[key].values()
          for r in f['fused_fitted']]))
+    most, where = max((r['most_disagreeing_in_a_row'], f'{name}, {key}')
+                      for key in ('pairs', 'holes')
+                      for name, f in results[key].items()
+                      for r in f['fused_fitted'])
+    print(f'the most scans in a row that disagreed on a run (fitted): '
+          f'{most} of {FusionParams().reset_after} ({where})')
     with atomic_write(args.out or RESULTS / 'fusion.json', 'w') as f:
         json.dump(results, f, indent=1)
     print(f'wrote {args.out or RESULTS / "fusion.json"}')

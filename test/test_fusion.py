@@ -321,15 +321,21 @@ def test_a_kidnapped_robot_restarts_with_the_scans_that_disagreed():
     true_xy = truth[at, 1:3] + np.where(stamps[:, None] > 60, [0, 30.0], 0)
     scans = true_xy + np.random.default_rng(0).normal(0, 0.5, (len(at), 2))
     fusion = Fusion(seed=0)
-    poses, j = [], 0
+    poses, j, before = [], 0, None
     for row in odo:
         while j < len(at) and stamps[j] <= row[0]:
+            if before is None and stamps[j] > 60:
+                before = fusion.filter.most_disagreeing
             poses += fusion.scan(stamps[j], scans[j], PLACE)
             j += 1
         poses += fusion.odometry(*row)[1]
     restarts = [i for i, pose in enumerate(poses) if pose.restarted]
     assert [round(poses[i].stamp) for i in restarts] == [1, 70]
     assert fusion.counts['scans_replayed'] == 10
+    # how near the filter came to a restart: before the kidnap, not near;
+    # after it, all the way
+    assert before == 0
+    assert fusion.filter.most_disagreeing == fusion.filter.params.reset_after
     i = restarts[1] + 10
     assert np.linalg.norm(poses[i].xy - true_xy[i]) < 1.2, poses[i].xy
 

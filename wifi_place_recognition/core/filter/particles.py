@@ -128,6 +128,7 @@ class ParticleFilter:
         self.state = None
         self.weight = None
         self.disagreeing = 0
+        self.most_disagreeing = 0
 
     @property
     def rng(self):
@@ -187,9 +188,13 @@ class ParticleFilter:
         (:data:`DISAGREED`): the robot was carried away (kidnapped), or the
         filter went wrong; it does too when no particle fits the scan
         (:data:`NOTHING_FITS`). '' when it did not restart.
+        ``most_disagreeing``: the most scans in a row that disagreed so
+        far (``reset_after`` once it restarted; below it, how near).
         """
         if self.sensor.disagrees(*self.position(), scan):
             self.disagreeing += 1
+            self.most_disagreeing = max(self.most_disagreeing,
+                                        self.disagreeing)
         else:
             self.disagreeing = 0
         if self.disagreeing >= self.params.reset_after:
