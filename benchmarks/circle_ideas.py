@@ -50,7 +50,7 @@ from wifi_place_recognition.core.coverage import (
     COVERED_M, distance_by_place, features, unheard_share)
 from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.locator import (
-    calibrated_edge_sigma, EDGE_POWER, Locator, MAX_EDGE_SIGMA_M, R95)
+    calibrated_edge_sigma, EDGE_POWER, least_widening, Locator, R95)
 from wifi_place_recognition.core.preprocessing import signal
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.training.coverage import auc
@@ -114,15 +114,6 @@ def cut_examples(model, survey_csv, seed=0):
     x, answers = np.array(x), np.array(answers)
     ok = np.isfinite(x).all(axis=1) & np.isfinite(answers).all(axis=1)
     return x[ok], np.concatenate(covered)[ok], *answers[ok].T
-
-
-def least_widening(error, sigma, weight):
-    """Return the least e putting 95 % within R95 hypot(sigma, e weight)."""
-    missing = np.sqrt(np.maximum((error / R95) ** 2 - sigma ** 2, 0.0))
-    with np.errstate(divide='ignore', invalid='ignore'):
-        needed = np.where(missing == 0, 0.0, missing / weight)
-    return float(min(np.quantile(np.nan_to_num(needed, nan=np.inf), 0.95,
-                                 method='higher'), MAX_EDGE_SIGMA_M))
 
 
 def logit(p):

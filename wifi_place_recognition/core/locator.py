@@ -291,13 +291,25 @@ def calibrated_edge_sigma(errors, sigma, side, target=0.95):
     :data:`MAX_EDGE_SIGMA_M`) for which ``target`` of them lie within
     R95 hypot(sigma, e side^EDGE_POWER); 0 if they already do.
     """
-    errors, sigma, side = (np.asarray(a, np.float64)
-                           for a in (errors, sigma, side))
+    return least_widening(errors, sigma,
+                          np.asarray(side, np.float64) ** EDGE_POWER, target)
+
+
+def least_widening(errors, sigma, weight, target=0.95):
+    """
+    Return the least e (m) that puts ``target`` of scans inside.
+
+    Inside: within R95 hypot(sigma, e weight) of the truth; ``errors``
+    (m), ``sigma`` (m) and ``weight`` one per scan; at most
+    :data:`MAX_EDGE_SIGMA_M`, 0 if they already are.
+    """
+    errors, sigma, weight = (np.asarray(a, np.float64)
+                             for a in (errors, sigma, weight))
     if not len(errors):
         return 0.0
     missing = np.sqrt(np.maximum((errors / R95) ** 2 - sigma ** 2, 0.0))
     with np.errstate(divide='ignore', invalid='ignore'):
-        needed = np.where(missing == 0, 0.0, missing / side ** EDGE_POWER)
+        needed = np.where(missing == 0, 0.0, missing / weight)
     needed = np.nan_to_num(needed, nan=np.inf)
     return float(min(np.quantile(needed, target, method='higher'),
                      MAX_EDGE_SIGMA_M))
