@@ -306,6 +306,44 @@ def test_the_pose_is_as_sure_as_the_last_scans_lie_near_it():
         pytest.approx(fusion.offsets.variance() + gained)
 
 
+def test_a_young_filter_is_at_least_as_wide_as_its_scans_offsets():
+    """
+    Scans 8 m aside from just after the heading is found: it follows them.
+
+    Until the filter has settled, the covariance is the particles', but
+    at least the variance the last 10 scans' offsets say (the cloud
+    alone is narrower there), widened alike on x and y.
+    """
+    truth, odo = straight(n=1200)
+    at = np.arange(5, 1200, 10)
+    stamps = truth[at, 0] + 0.01
+    scans = truth[at, 1:3] + np.random.default_rng(2).normal(0, 1.0,
+                                                             (len(at), 2))
+    cov = fuse_offline(odo, (stamps, scans), Fusion(seed=0))[2]
+    known = np.flatnonzero(cov[:, 2, 2] < UNKNOWN_VARIANCE)[0]
+    scans[known + 1:known + 40] += [0.0, 8.0]
+    xy, _, cov = fuse_offline(odo, (stamps, scans), Fusion(seed=0))
+    assert np.flatnonzero(cov[:, 2, 2] < UNKNOWN_VARIANCE)[0] == known
+    cloud = fuse_offline(odo, (stamps, scans),
+                         Fusion(FusionParams(pose_scans=0), seed=0))[2]
+    offsets = scans - xy
+    young = range(known + 9, known + SETTLE_SCANS - 1)
+    widened = 0
+    for i in young:
+        mean = offsets[i - 9:i + 1].mean(axis=0)
+        variance = np.trace(cov[i, :2, :2]) / 2
+        assert variance >= mean @ mean - 1e-9
+        if variance > np.trace(cloud[i, :2, :2]) / 2 + 1e-9:
+            widened += 1
+            assert variance == pytest.approx(mean @ mean)
+            assert cov[i, 0, 0] - cloud[i, 0, 0] == \
+                pytest.approx(cov[i, 1, 1] - cloud[i, 1, 1])
+            np.testing.assert_allclose(cov[i, 2], cloud[i, 2])
+    assert widened >= 10
+    assert cov[young[0] - 1] == pytest.approx(cloud[young[0] - 1])
+    assert cov[young[-1] + 1, 0, 1] == 0.0     # settled: the offsets'
+
+
 def test_a_kidnapped_robot_restarts_with_the_scans_that_disagreed():
     """
     Carried 30 m aside at 60 s, odometry none the wiser; scans 0.5 m noise.

@@ -432,11 +432,20 @@ class Fusion:
         the variance of the last ``pose_scans`` scans' offsets on x and y,
         plus what the particles spread since the last scan (odometry
         alone), and the particles' yaw variance; before, the particles'
-        covariance.
+        covariance, widened alike on x and y to at least the offsets'
+        variance once ``pose_scans`` of them were kept with the heading
+        known (a young filter that settled its heading wrong is metres
+        off with a cloud narrower than that).
         """
         variance = self.offsets.variance()
         if variance is None:
             return estimate.cov
+        if not self.offsets.settled:
+            cov = estimate.cov.copy()
+            short = variance - np.trace(cov[:2, :2]) / 2
+            if short > 0:
+                cov[:2, :2] += short * np.eye(2)
+            return cov
         grown = max(np.trace(estimate.cov[:2, :2]) / 2 - self.spread, 0.0)
         cov = np.zeros((3, 3))
         cov[0, 0] = cov[1, 1] = variance + grown

@@ -10,16 +10,19 @@ after each was applied: their mean is where the scans, averaged along the
 track, say the pose is wrong (their noise averages out, a pose that
 crosses a hole on odometry or is left behind after one keeps them long).
 Its length is the pose's standard deviation on each axis, once the
-filter has settled: a filter whose heading was only just found follows
-the scans it found it from, biased or not, and their offsets are small
-while it may be metres off (ROS-free).
+filter has settled (:attr:`ScanOffsets.settled`): a filter whose heading
+was only just found follows the scans it found it from, biased or not,
+and their offsets are small while it may be metres off; until then they
+are a least width for the particles' spread, which a young filter's
+error can exceed too (ROS-free).
 """
 
 from collections import deque
 
 import numpy as np
 
-#: Scans applied with the heading known before the offsets are used.
+#: Scans applied with the heading known before the offsets are the pose's
+#: variance (before: the least of the particles' spread).
 SETTLE_SCANS = 30
 #: The least standard deviation (m) reported: keeps the covariance
 #: positive when the offsets happen to cancel.
@@ -32,13 +35,13 @@ class ScanOffsets:
     def __init__(self, scans):
         self.scans = int(scans)
         self.offsets = deque(maxlen=self.scans)
-        self.settled = 0    # scans applied since the heading was known
+        self.known = 0      # scans applied since the heading was known
         self._variance = None
 
     def clear(self):
         """Forget them (the filter started afresh)."""
         self.offsets.clear()
-        self.settled = 0
+        self.known = 0
         self._variance = None
 
     def add(self, scan_xy, pose_xy, heading_known):
@@ -56,18 +59,27 @@ class ScanOffsets:
             return
         self.offsets.append(np.asarray(scan_xy, np.float64) -
                             np.asarray(pose_xy, np.float64))
-        self.settled += 1
-        if self.settled >= max(SETTLE_SCANS, self.scans):
+        self.known += 1
+        if len(self.offsets) == self.scans:
             mean = np.mean(self.offsets, axis=0)
             self._variance = max(float(mean @ mean), LEAST_SD ** 2)
 
+    @property
+    def settled(self):
+        """
+        Return True once the offsets are the pose's variance.
+
+        After :data:`SETTLE_SCANS` scans (and ``scans``) added with the
+        heading known; before, :meth:`variance` is a least one.
+        """
+        return self.known >= max(SETTLE_SCANS, self.scans)
+
     def variance(self):
         """
-        Return the pose's variance on each axis (m^2), or None.
+        Return the variance on each axis (m^2) the offsets say, or None.
 
         The squared length of the offsets' mean (at least
-        :data:`LEAST_SD` squared); None until :data:`SETTLE_SCANS` scans
-        (and ``scans``) were added with the heading known, and with
-        ``scans`` 0 (not used).
+        :data:`LEAST_SD` squared); None until ``scans`` scans were added
+        with the heading known, and with ``scans`` 0 (not used).
         """
         return self._variance
