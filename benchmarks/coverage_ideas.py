@@ -39,7 +39,14 @@ seeds ``--seeds`` (default 0), the fitted odometry.
   whose direction of travel lies across the principal axis of the
   survey positions within ``AXIS_RADIUS_M`` of the scan's answer is
   weighed down, in proportion to how line-like they lie); and told
-  both the heading at a start and the holes.
+  both the heading at a start and the holes; the heading the scans'
+  own track gives (``TrackHeadingFusion``: the odometry of the last
+  ``track_s`` seconds turned onto the scans' positions by least squares,
+  as the filter's misfit does, gives the map heading; each particle
+  weighed by it, a Gaussian of ``TRACK_HEADING_K`` times the fit's root
+  mean square residual (at least ``TRACK_HEADING_LEAST_M``) over the
+  track's root mean square radius, over the outlier floor), always or
+  only while the particles' heading is not known.
 
 Table on stdout, JSON in ``benchmarks/results/coverage-ideas.json``.
 
@@ -62,7 +69,9 @@ from wifi_place_recognition.core.coverage import (
     COVERED_M, EDGE_RADIUS_M, one_sidedness, PAIRS_PER_STEP)
 from wifi_place_recognition.core.filter.angles import wrap
 from wifi_place_recognition.core.filter.fusion import Fusion, relative
+from wifi_place_recognition.core.filter.particles import UNKNOWN_VARIANCE
 from wifi_place_recognition.core.filter.sensor import WifiSensorModel
+from wifi_place_recognition.core.filter.track_misfit import TrackMisfit
 from wifi_place_recognition.core.filter.trajectory import fuse_offline, score
 from wifi_place_recognition.training.coverage import auc
 
@@ -79,6 +88,9 @@ AXIS_RADIUS_M, AXIS_MIN_REFS, AXIS_MOVED_M = 4.0, 5, 0.3
 AXIS_KAPPA, AXIS_SHARE = 4.0, 0.8
 #: Spread (rad) of the true heading a told start is given.
 TOLD_HEADING_SD = 0.1
+#: The heading from the scans' track: its width is this many times the
+#: fit's residual (at least the least, m) over the track's radius.
+TRACK_HEADING_K, TRACK_HEADING_LEAST_M = 1.0, 2.0
 
 
 def nearest_covered(xy, survey_xy, reach=COVERED_M):
@@ -199,6 +211,72 @@ class AxisPriorFusion(Fusion):
         return super()._apply(scan, odometry)
 
 
+class TrackHeadingSensor(WifiSensorModel):
+    """The default sensor, and a heading to weigh the next update by."""
+
+    heading = None      # (map heading, its width), used once
+
+    def likelihood(self, state, scan):
+        """Return the default likelihood times the heading's, if any."""
+        out = super().likelihood(state, scan)
+        if self.heading is not None:
+            (mean, width), self.heading = self.heading, None
+            turn = wrap(state[:, 2] - mean)
+            floor = self.params.wifi_outlier
+            out = out * ((1 - floor) * np.exp(-turn ** 2 / (2 * width ** 2))
+                         + floor)
+        return out
+
+
+class TrackHeadingFusion(Fusion):
+    """The heading the scans' track gives weighs the particles."""
+
+    def __init__(self, params, seed, while_unknown):
+        super().__init__(params, seed=seed, sensor=TrackHeadingSensor(params))
+        self.while_unknown = while_unknown
+        self.track = []     # (stamp, scan x + y j, odometry x + y j)
+
+    def heading(self, stamp, xy):
+        """Return (map heading, width) from the scans' track, or None."""
+        at = self._odometry_at(stamp)
+        self.track = [t for t in self.track
+                      if t[0] >= stamp - self.filter.params.track_s]
+        self.track.append((stamp, complex(*xy), complex(at[1], at[2])))
+        _, scans, odo = np.array(self.track).T
+        if len(scans) < TrackMisfit.MIN_SCANS or \
+                np.abs(np.diff(odo)).sum() < TrackMisfit.MIN_PATH:
+            return None
+        scans, odo = scans - scans.mean(), odo - odo.mean()
+        turn = np.vdot(odo, scans)
+        if not turn:
+            return None
+        left = np.abs(scans - odo * turn / abs(turn))
+        residual = max(math.sqrt((left ** 2).mean()), TRACK_HEADING_LEAST_M)
+        radius = math.sqrt((np.abs(odo) ** 2).mean())
+        return (at[3] + math.atan2(turn.imag, turn.real),
+                min(TRACK_HEADING_K * residual / radius, math.pi))
+
+    def _apply(self, scan, odometry):
+        f = self.filter
+        if not (odometry and f.started and scan[2] == self.place):
+            self.track = []
+        else:
+            heading = self.heading(scan[0], scan[1])
+            if heading is not None and not (
+                    self.while_unknown and
+                    f.estimate().cov[2, 2] < UNKNOWN_VARIANCE):
+                f.sensor.heading = heading
+        pose = super()._apply(scan, odometry)
+        f.sensor.heading = None
+        if pose is not None and pose.restarted:
+            self.track = []
+        return pose
+
+    def _replay(self):
+        self.filter.sensor.heading = None   # not the replayed scans'
+        super()._replay()
+
+
 def survey_positions(model):
     """Return every reference position of a model (m, map frame)."""
     return np.concatenate([model.position.map_xy(c)
@@ -226,6 +304,12 @@ def filters(fitted, single, side, hole, survey_xy, test):
             fitted.fusion, single[2],
             lambda p, seed: HeadingToldFusion(p, seed, test.stamps,
                                               test.yaw)),
+        'heading from the track': (
+            fitted.fusion, single[2],
+            lambda p, seed: TrackHeadingFusion(p, seed, False)),
+        'heading from the track while unknown': (
+            fitted.fusion, single[2],
+            lambda p, seed: TrackHeadingFusion(p, seed, True)),
         'told both': (
             weighed, np.where(hole, 0.0, 1.0),
             lambda p, seed: HeadingToldFusion(p, seed, test.stamps,
@@ -321,7 +405,8 @@ def main():
     seeds = [int(s) for s in args.seeds.split(',')]
     results = {}
     print(f'{"test <- survey":28s} hole  AUC: P  side  fused / single: '
-          f'default, weighed, edge, belief, told, axis, heading, both')
+          f'default, weighed, edge, belief, told, axis, heading, track, '
+          f'track while unknown, both')
     with tempfile.TemporaryDirectory() as folder:
         for site, runs in fb.site_runs(args.data, folder):
             for holes in (False, True):
