@@ -41,7 +41,8 @@ once the recent scans agree with that one and not with it
 Between scans the particles move up to ``move_lag`` behind the newest
 odometry. Once the filter has settled, the pose's covariance on x and y
 is how far the last ``pose_scans`` scans lie from it
-(:mod:`.pose_spread`), not the particles' spread.
+(:mod:`.pose_spread`), not the particles' spread; before, the
+particles' spread, at least as wide as that.
 """
 
 from collections import Counter, deque
