@@ -71,7 +71,8 @@ from wifi_place_recognition.core.filter.angles import wrap
 from wifi_place_recognition.core.filter.fusion import Fusion, relative
 from wifi_place_recognition.core.filter.particles import UNKNOWN_VARIANCE
 from wifi_place_recognition.core.filter.sensor import WifiSensorModel
-from wifi_place_recognition.core.filter.track_misfit import TrackMisfit
+from wifi_place_recognition.core.filter.track_misfit import (TrackMisfit,
+                                                             track_fit)
 from wifi_place_recognition.core.filter.trajectory import fuse_offline, score
 from wifi_place_recognition.training.coverage import auc
 
@@ -234,32 +235,25 @@ class TrackHeadingFusion(Fusion):
     def __init__(self, params, seed, while_unknown):
         super().__init__(params, seed=seed, sensor=TrackHeadingSensor(params))
         self.while_unknown = while_unknown
-        self.track = []     # (stamp, scan x + y j, odometry x + y j)
+        self.track = TrackMisfit(params.track_s)    # its own, up to the scan
 
     def heading(self, stamp, xy):
         """Return (map heading, width) from the scans' track, or None."""
         at = self._odometry_at(stamp)
-        self.track = [t for t in self.track
-                      if t[0] >= stamp - self.filter.params.track_s]
-        self.track.append((stamp, complex(*xy), complex(at[1], at[2])))
-        _, scans, odo = np.array(self.track).T
-        if len(scans) < TrackMisfit.MIN_SCANS or \
-                np.abs(np.diff(odo)).sum() < TrackMisfit.MIN_PATH:
+        if self.track.add(stamp, xy, at[1:3]) is None:
             return None
-        scans, odo = scans - scans.mean(), odo - odo.mean()
-        turn = np.vdot(odo, scans)
-        if not turn:
-            return None
-        left = np.abs(scans - odo * turn / abs(turn))
-        residual = max(math.sqrt((left ** 2).mean()), TRACK_HEADING_LEAST_M)
-        radius = math.sqrt((np.abs(odo) ** 2).mean())
+        _, scans, odo = np.array(self.track.track).T
+        turn, left = track_fit(scans, odo)
+        residual = max(math.sqrt((np.abs(left) ** 2).mean()),
+                       TRACK_HEADING_LEAST_M)
+        radius = math.sqrt((np.abs(odo - odo.mean()) ** 2).mean())
         return (at[3] + math.atan2(turn.imag, turn.real),
                 min(TRACK_HEADING_K * residual / radius, math.pi))
 
     def _apply(self, scan, odometry):
         f = self.filter
         if not (odometry and f.started and scan[2] == self.place):
-            self.track = []
+            self.track.clear()
         else:
             heading = self.heading(scan[0], scan[1])
             if heading is not None and not (
@@ -269,7 +263,7 @@ class TrackHeadingFusion(Fusion):
         pose = super()._apply(scan, odometry)
         f.sensor.heading = None
         if pose is not None and pose.restarted:
-            self.track = []
+            self.track.clear()
         return pose
 
     def _replay(self):

@@ -54,8 +54,21 @@ class TrackMisfit:
         _, scans, odo = np.array(self.track).T
         if np.abs(np.diff(odo)).sum() < self.MIN_PATH:
             return None
-        scans = scans - scans.mean()
-        odo = odo - odo.mean()
-        turn = np.vdot(odo, scans)      # its angle turns odo onto scans
-        left = np.abs(scans - odo * (turn / abs(turn) if turn else 1.0))
+        left = np.abs(track_fit(scans, odo)[1])
         return float(max(np.sqrt((left * left).mean()), left[-1]))
+
+
+def track_fit(scans, odometry):
+    """
+    Turn and shift an odometry track onto the scans' track (least squares).
+
+    ``scans``, ``odometry``: positions as complex numbers (x + y j), one
+    per scan. Return (turn, left): the unit complex number that turns the
+    odometry (its angle: the map heading minus the odometry's), and what
+    is left of each scan after the fit (complex, m).
+    """
+    scans = scans - scans.mean()
+    odometry = odometry - odometry.mean()
+    turn = np.vdot(odometry, scans)
+    turn = turn / abs(turn) if turn else 1.0
+    return turn, scans - odometry * turn
