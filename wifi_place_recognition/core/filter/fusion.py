@@ -441,13 +441,12 @@ class Fusion:
         variance = self.offsets.variance()
         if variance is None:
             return estimate.cov
+        cloud = np.trace(estimate.cov[:2, :2]) / 2     # on each axis
         if not self.offsets.settled:
             cov = estimate.cov.copy()
-            short = variance - np.trace(cov[:2, :2]) / 2
-            if short > 0:
-                cov[:2, :2] += short * np.eye(2)
+            cov[:2, :2] += max(variance - cloud, 0.0) * np.eye(2)
             return cov
-        grown = max(np.trace(estimate.cov[:2, :2]) / 2 - self.spread, 0.0)
+        grown = max(cloud - self.spread, 0.0)
         cov = np.zeros((3, 3))
         cov[0, 0] = cov[1, 1] = variance + grown
         cov[2, 2] = estimate.cov[2, 2]
