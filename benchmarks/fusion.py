@@ -26,7 +26,8 @@ with every heading. Also: a
 kidnapped robot (two runs spliced, the odometry continuous, the true
 position jumping) and the recovery time (the error below 2 m for 10 s
 in a row), per survey; on every run, how near the filter came to a
-restart (the most scans in a row that disagreed). And leaving a hole
+restart (the most scans in a row that disagreed); each run's drift over
+stretches of 20 m from its truth (:func:`drift_steadiness`). And leaving a hole
 (:func:`hole_exits`): where
 the robot comes back to covered ground for at least 30 s after at least
 10 scans in a hole, how far off the pose is, and how long until it is
@@ -63,6 +64,8 @@ from wifi_place_recognition.core.coverage import (COVERED_M,
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.filter.fusion import Fusion
+from wifi_place_recognition.core.filter.odometry_fit import (FitError,
+                                                             fit_odometry)
 from wifi_place_recognition.core.filter.particles import FusionParams
 from wifi_place_recognition.core.filter.trajectory import (
     fuse_offline, odometry_alone, score)
@@ -92,6 +95,9 @@ EXIT_BACK_M, EXIT_FAR_M, EXIT_BACK_S = 1.0, 2.0, 30.0
 SET_START_SD = (0.5, math.radians(10.0))
 #: Errors are scored after this many seconds (the start has no prior).
 SETTLE_S = 60.0
+#: Each run's drift is measured from the truth over stretches of this
+#: many metres: how steady it is, beside the filter's ``drift_walk``.
+STEADY_M = 20.0
 GOALS = ('fused/single <= 0.5 and never > 1 (any pair, seed), p95 <= 2.5 m, '
          'max after 60 s <= 3 m, yaw median <= 5 deg, 95 % ellipse '
          '0.90-0.98, in holes fused <= single, kidnap below 2 m within '
@@ -117,6 +123,9 @@ CANDIDATES = (
     {'reset_track_sigmas': 1.5},
     {'track_s': 20.0},
     {'reset_track_sigmas': 2.0, 'track_s': 20.0},
+    {'drift_walk': 0.001},          # the drift steadier (round 18)
+    {'drift_walk': 0.0005},
+    {'particles': 20000},           # more particles: 7 times the cost
 )
 
 
@@ -406,6 +415,36 @@ def kidnap(params, a, b, single_a, single_b, seeds=SEEDS):
     return out
 
 
+def drift_steadiness(run):
+    """
+    Return the run's drift and its spread over STEADY_M stretches (deg/m).
+
+    ``fit_odometry``'s figures on the run's own truth and odometry, and
+    how far the filter's ``drift_walk`` lets a particle's drift wander
+    over such a stretch (one sd); the reason when the run is too short.
+    """
+    wander = math.degrees(FusionParams().drift_walk * math.sqrt(STEADY_M))
+    try:
+        report = fit_odometry(run.odometry, run.stamps, run.xy, run.yaw,
+                              window_m=STEADY_M)[1]
+    except FitError as exc:
+        return {'error': str(exc)}
+    return {'window_m': STEADY_M, 'stretches': report['windows'],
+            'drift_deg_per_m': report['drift_deg_per_m'],
+            'stretch_sd_deg_per_m': report['window_drift_deg_per_m_sd'],
+            'filter_wander_deg_per_m': wander}
+
+
+def steadiness_line(steady):
+    """Return one line of :func:`drift_steadiness`'s figures."""
+    if 'error' in steady:
+        return steady['error']
+    return (f'{steady["drift_deg_per_m"]:.2f} deg/m, sd '
+            f'{steady["stretch_sd_deg_per_m"]:.2f} over '
+            f'{steady["stretches"]} stretches of {STEADY_M:g} m (the '
+            f'filter lets it wander {steady["filter_wander_deg_per_m"]:.2f})')
+
+
 def recovery(since, error, hold_s=RECOVERED_HOLD_S):
     """
     Return when ``error`` first falls below 2 m for ``hold_s`` seconds.
@@ -671,10 +710,16 @@ def main():
                       RESULTS / 'fusion-selection.json')
     results = {'protocol': __doc__.strip(), 'seeds': SEEDS, 'goals': GOALS,
                'defaults': FusionParams().to_dict() or 'the code\'s',
-               'pairs': {}, 'holes': {}, 'kidnap': {}}
+               'pairs': {}, 'holes': {}, 'kidnap': {},
+               'drift_steadiness': {}}
     print(HEADER)
     with tempfile.TemporaryDirectory() as folder:
         for site, runs in site_runs(args.data, folder):
+            for run in runs:
+                results['drift_steadiness'][run.name] = steady = \
+                    drift_steadiness(run)
+                print(f'{run.name}: drift ' + steadiness_line(steady),
+                      flush=True)
             for holes, key in ((False, 'pairs'), (True, 'holes')):
                 trained = {r.name: models(r, folder, holes) for r in runs}
                 for k, (train, test) in enumerate(permutations(runs, 2)):
