@@ -47,6 +47,16 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
             knn.append(float(values['scan_knn_sigma_m']))
         np.testing.assert_allclose(got, expected[rows], atol=2e-3)
         assert all(0.0 <= p <= 1.0 for p in got)
+        # the health counts the answers off the survey (these rows: some
+        # in the hole, the others not; the probe), a scan answered twice
+        # (sent again before its answer came back) twice
+        assert 0 < (expected[rows] < 0.5).sum() < len(rows)
+        off = sum(float(status_values(msg.status[0])['coverage']) < 0.5
+                  for msg in client.answers.values())
+        counts, values = client.settled_counts()
+        repeated = counts['answered'] - len(client.answers)
+        assert off <= int(values['scans_off_survey']) <= off + repeated, \
+            (values['scans_off_survey'], off, repeated)
         # each scan's own sigma, widened where the answer lies at the
         # survey's edge (the survey calibrated by how much)
         assert model.position.edge_sigma > 0

@@ -120,6 +120,8 @@ def test_bad_scans_are_rejected_counted_and_survived(running):
     assert values['rejected/implausible_rssi'] == '2'
     assert values['rejected/non_finite'] == '2'
     assert counts['answered'] >= 2      # the probe and the good scan
+    # a model without a coverage model cannot tell scans off the survey
+    assert model.coverage is None and values['scans_off_survey'] == 'n/a'
     selection = model.provenance['selection']
     assert float(values['model_cross_validated_building_floor_accuracy']) \
         == pytest.approx(selection['accuracy_mean'])

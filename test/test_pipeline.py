@@ -12,6 +12,7 @@ from wifi_place_recognition.core.filter.trajectory import fuse_offline
 from wifi_place_recognition.core.pipeline.scan_pipeline import (
     position_answer, ScanPipeline)
 from wifi_place_recognition.core.recognizer import PlaceRecognizer, WARN
+from wifi_place_recognition.data.fingerprints import read_fingerprints
 
 from conftest import mac
 
@@ -143,9 +144,17 @@ def test_scans_are_recognised_rejected_and_counted(surveyed_model):
     bad = pipeline.scan(names, [-60.0] * 29, 2.0, 2.0)
     assert bad.answer is None and bad.poses == []
     assert bad.rejected.reason == 'length_mismatch'
+    # two scans of the survey itself: covered; the one above, alike on
+    # every AP, sounds like nowhere the survey went
+    fp = read_fingerprints(surveyed_model.parent / 'a.csv')
+    for row in (0, 1):
+        heard = np.flatnonzero(np.isfinite(fp.rssi[row]))
+        covered = pipeline.scan([fp.ap_ids[j] for j in heard],
+                                fp.rssi[row, heard], 3.0 + row, 3.0 + row)
+        assert covered.answer.coverage >= 0.5 > out.answer.coverage
     assert dict(pipeline.counts) == {
-        'received': 4, 'answered': 1, 'rejected': 1, 'dropped': 2,
-        'rejected/length_mismatch': 1}
+        'received': 6, 'answered': 3, 'rejected': 1, 'dropped': 2,
+        'rejected/length_mismatch': 1, 'off_survey': 1}
     assert pipeline.reset() == ['fused pose']       # tracking off
     pipeline.configure(fusion=False)
     assert pipeline.reset() == []

@@ -9,7 +9,8 @@ import numpy as np
 
 from ..core.artifact import load_model
 from ..core.evaluation import align
-from ..core.coverage import COVERED_M, distance_by_place
+from ..core.coverage import (COVERED_M, OFF_SURVEY_BELOW,
+                             distance_by_place, uncovered)
 from ..core.gaps import gaps
 from ..core.resources import default_model_path
 from .common import (add_data_arguments, check_outputs, data_options,
@@ -27,8 +28,8 @@ def main(argv=None):
                     'With positions in the run (X, Y from the robot\'s '
                     'localiser), a scan is off the survey when no survey '
                     'scan of its building/floor lies within --covered-m; '
-                    'without, when the model\'s coverage probability is '
-                    'below 0.5.')
+                    f'without, when the model\'s coverage probability is '
+                    f'below {OFF_SURVEY_BELOW:g}.')
     p.add_argument('--model', type=Path, default=None,
                    help=f'model file with a position output (default: the '
                         f'shipped {default_model_path().name})')
@@ -122,8 +123,9 @@ def off_survey(model, fp, covered_m):
                              'coverage section (trained before it was '
                              'added, or too few held-out scans): record '
                              'the run with a pose topic, or retrain')
-        return {'off': ~(coverage >= 0.5),
-                'basis': 'model coverage probability < 0.5'}
+        return {'off': uncovered(coverage),
+                'basis': f'model coverage probability < '
+                         f'{OFF_SURVEY_BELOW:g}'}
     locator = model.position
     index = {tuple(c): i for i, c in enumerate(model.classes.tolist())}
     label = np.array([index.get((int(b), int(f)), -1) for b, f in

@@ -11,7 +11,8 @@ probability that the scan lies within a few metres of a survey scan.
 Training fits it on the survey alone
 (:mod:`wifi_place_recognition.training.coverage`): the
 cross-validation folds hold out stretches of the survey, and each held-out
-scan is labelled covered when a kept scan lies near it. Numpy only.
+scan is labelled covered when a kept scan lies near it. :func:`uncovered`
+is the one rule that calls a probability off the survey. Numpy only.
 """
 
 from dataclasses import dataclass
@@ -28,6 +29,20 @@ PAIRS_PER_STEP = 1 << 20
 #: Survey positions within this distance (m) of an answer count for its
 #: :func:`one_sidedness`.
 EDGE_RADIUS_M = 5.0
+#: A scan whose coverage probability is below this counts as off the
+#: survey (:func:`uncovered`: survey_gaps's stretches of a run without
+#: positions, classifier_node's ``scans_off_survey``).
+OFF_SURVEY_BELOW = 0.5
+
+
+def uncovered(probability):
+    """
+    Return True where a coverage probability says off the survey.
+
+    Below :data:`OFF_SURVEY_BELOW`, or NaN; an array for an array, a
+    numpy bool for one number.
+    """
+    return ~(np.asarray(probability, np.float64) >= OFF_SURVEY_BELOW)
 
 
 def distance_to_survey(xy, survey_xy):

@@ -363,6 +363,9 @@ class ClassifierNode(Node):
         rss, peak = _memory_mib()
         values = [_kv(f'scans_{k}', counts.get(k, 0)) for k in
                   ('received', 'answered', 'rejected', 'dropped')]
+        coverage = self.pipeline.recognizer.model.coverage
+        values.append(_kv('scans_off_survey', 'n/a' if coverage is None
+                          else counts['off_survey']))
         values += [_kv(f'rejected/{r}', counts.get(f'rejected/{r}', 0))
                    for r in REJECT_REASONS + ('internal_error',)]
         values += [

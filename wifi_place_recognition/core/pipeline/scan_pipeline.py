@@ -5,7 +5,8 @@ One scan's path, ROS-free: recognise, place changes, odometry fusion.
 benchmarks run offline (:func:`.filter.trajectory.fuse_offline`): a scan
 (AP names, RSSI, stamp) or odometry in, :class:`.outputs.Outputs` out.
 A scan is recognised (:class:`.recognizer.PlaceRecognizer`; a scan it
-cannot use is rejected and counted), its answer followed by
+cannot use is rejected and counted, one its model's coverage probability
+puts off the survey counted as ``off_survey``), its answer followed by
 :class:`.place_changes.PlaceChanges` (the current place, why to re-seed),
 and its position either given as it is or, while odometry arrives and
 fusion is on, fed to the filter (:class:`.fusion_stage.FusionStage`),
@@ -25,6 +26,7 @@ import time
 
 import numpy as np
 
+from ..coverage import uncovered
 from ..filter.fusion import Fusion
 from ..recognizer import OK, Place, PlaceRecognizer
 from ..scan import ScanRejected
@@ -56,7 +58,8 @@ class ScanPipeline:
         self.fusion = None if fusion is None else FusionStage(fusion)
         self.changes = PlaceChanges()
         self.initial_pose_on_change = False
-        self.counts = Counter(received=0, answered=0, rejected=0, dropped=0)
+        self.counts = Counter(received=0, answered=0, rejected=0, dropped=0,
+                              off_survey=0)
         self.last_latency_ms = math.nan
         self._requested = False    # the next confident answer: initialpose
         self._pending = None       # (stamp, reasons, place): a fused one
@@ -174,6 +177,8 @@ class ScanPipeline:
             return self._reject('internal_error', repr(exc))
         self.last_latency_ms = (time.perf_counter() - received) * 1e3
         self.counts['answered'] += 1
+        if answer.coverage is not None:     # the model has a coverage model
+            self.counts['off_survey'] += bool(uncovered(answer.coverage))
         return self.answer(answer, stamp, now, source,
                            Outputs(answer, latency_ms=self.last_latency_ms))
 
