@@ -27,11 +27,10 @@ kidnapped robot (two runs spliced, the odometry continuous, the true
 position jumping) and the recovery time (the error below 2 m for 10 s
 in a row), per survey; on every run, how near the filter came to a
 restart (the most scans in a row that disagreed); each run's drift over
-stretches of 20 m from its truth (:func:`drift_steadiness`). And leaving a hole
-(:func:`hole_exits`): where
-the robot comes back to covered ground for at least 30 s after at least
-10 scans in a hole, how far off the pose is, and how long until it is
-below 1 m.
+stretches of 20 m from its truth (:func:`drift_steadiness`). And leaving
+a hole (:func:`hole_exits`): where the robot comes back to covered
+ground for at least 30 s after at least 10 scans in a hole, how far off
+the pose is, and how long until it is below 1 m.
 
 The filter's defaults were chosen by leave-one-building-out on these
 runs (``--select``: candidates scored on each building, seed 0, full and
