@@ -1,4 +1,4 @@
-"""The fusion benchmark's hole exits: when the robot is back on the survey."""
+"""The fusion benchmark's pieces: hole exits timed, a run's drift measured."""
 
 import math
 
