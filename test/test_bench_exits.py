@@ -1,6 +1,7 @@
 """The fusion benchmark's pieces: hole exits timed, a run's drift measured."""
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -35,10 +36,9 @@ def test_a_runs_drift_is_measured_stretch_by_stretch(fusion):
     x = 0.5 * t
     rate = np.radians(np.where(x < 40, 1.0, 2.0))
     lost = np.concatenate([[0.0], np.cumsum(rate[1:] * np.diff(x))])
-    run = type('Run', (), {})()
-    run.odometry = np.column_stack([t, x, 0 * t, -lost])
-    run.stamps, run.xy, run.yaw = t[::10], np.column_stack(
-        [x, 0 * t])[::10], 0 * t[::10]
+    run = SimpleNamespace(odometry=np.column_stack([t, x, 0 * t, -lost]),
+                          stamps=t[::10], xy=np.column_stack([x, 0 * t])[::10],
+                          yaw=0 * t[::10])
     steady = fusion.drift_steadiness(run)
     assert steady['stretches'] == 3
     assert abs(steady['drift_deg_per_m'] - 4 / 3) < 0.02
