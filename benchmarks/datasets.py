@@ -8,6 +8,9 @@ panel's README): the best method and their k-NN (a per-dataset
 configuration from the literature).
 """
 
+from wifi_place_recognition.data.fingerprints import (read_fingerprints,
+                                                      ReaderOptions)
+
 WIFINE_OPTIONS = dict(floor_column='floorID', building_column=None,
                       not_detected_marker=-100.0,
                       meta_columns=('num_visible_APs', 'z'))
@@ -41,3 +44,11 @@ for _name, (_site, _train, _test) in ROBOT.items():
 PUBLISHED = {'tut1': (91.22, 90.82), 'tut2': (94.32, 94.32),
              'tut5': (98.27, 96.84), 'tut6': (99.77, 99.66),
              'tut7': (98.36, 98.36)}
+
+
+def read(root, name, part):
+    """Return part ``train`` or ``test`` of dataset ``name`` under ``root``."""
+    data = DATASETS[name]
+    return read_fingerprints([str(root / p) for p in data[part]],
+                             role='train' if part == 'train' else 'test',
+                             options=ReaderOptions(**data['options']))

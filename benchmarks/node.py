@@ -7,7 +7,9 @@ lockstep (median, p99), in-node processing time (the node's latency_ms),
 sustained scans/s under a flood (answered per second, dropped counted),
 and the node's RSS. Ratios are torch / numpy from the same run. Then, in
 this process (steadier than across processes), the shipped model's
-``PlaceRecognizer.classify`` with tracking on, and each of its stages.
+``PlaceRecognizer.classify`` with tracking on, and each of its stages
+(the coverage probability: its features and regression, given the
+scan's distances to the references).
 
     python benchmarks/node.py --data validationData-public.csv
 """
@@ -29,6 +31,8 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
+from wifi_place_recognition.core.coverage import features, unheard_share
+from wifi_place_recognition.core import preprocessing
 from wifi_place_recognition.core.recognizer import PlaceRecognizer
 from wifi_place_recognition.core.resources import default_model_path
 from wifi_place_recognition.core.tracking import PlaceTracker
@@ -151,7 +155,8 @@ def stages(fp, passes):
         seen = np.flatnonzero(np.isfinite(row))
         scans.append(([fp.ap_ids[j] for j in seen], row[seen].tolist()))
     times = {k: [] for k in ('map', 'inputs', 'forward', 'position',
-                             'tracking', 'classify')}
+                             'coverage', 'tracking', 'classify')}
+    locator = model.position
     clock, t = time.perf_counter, 0.0
     for _ in range(passes):
         for names, rssi in scans:
@@ -163,16 +168,26 @@ def stages(fp, passes):
             t2 = clock()
             proba = recognizer.forward(scan.columns, inputs)
             t3 = clock()
-            xy, sigma = model.position.locate(scan.columns, scan.rssi,
-                                              int(proba.argmax()))
+            c = int(proba.argmax())
+            xy, sigma = locator.locate(scan.columns, scan.rssi, c)
             t4 = clock()
-            tracker.update(t, proba, xy, np.eye(2) * sigma ** 2)
+            distance = locator.distances(
+                scan.columns,
+                preprocessing.signal(scan.rssi, locator.representation), c)
             t5 = clock()
-            recognizer.classify(names, rssi, t + 2.5)
+            if model.coverage is not None:
+                model.coverage.probability(features(
+                    locator, distance, c, unheard_share(
+                        locator, scan.columns, c, scan.unknown)))
             t6 = clock()
+            tracker.update(t, proba, xy, np.eye(2) * sigma ** 2)
+            t7 = clock()
+            recognizer.classify(names, rssi, t + 2.5)
+            t8 = clock()
             for key, a, b in (('map', t0, t1), ('inputs', t1, t2),
                               ('forward', t2, t3), ('position', t3, t4),
-                              ('tracking', t4, t5), ('classify', t5, t6)):
+                              ('coverage', t5, t6), ('tracking', t6, t7),
+                              ('classify', t7, t8)):
                 times[key].append((b - a) * 1e3)
     return {k: (statistics.median(v), float(np.percentile(v, 99)))
             for k, v in times.items()}

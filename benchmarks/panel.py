@@ -52,13 +52,11 @@ from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.metrics import accuracies, class_index
 from wifi_place_recognition.core.locator import METRICS
 from wifi_place_recognition.core.preprocessing import signal, SIGNALS
-from wifi_place_recognition.data.fingerprints import (
-    read_fingerprints, ReaderOptions)
 from wifi_place_recognition.ros.classifier_parameters import PARAMETERS
 from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.folds import grouped_folds
 
-from datasets import DATASETS, PANEL, PUBLISHED, ROBOT
+from datasets import DATASETS, PANEL, PUBLISHED, read, ROBOT
 from runs import summary, train_and_test
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -179,13 +177,6 @@ def forest(train_fp, test_fp, seed):
                       predicted[:, 1])
 
 
-def _read(root, name, part):
-    data = DATASETS[name]
-    return read_fingerprints([str(root / p) for p in data[part]],
-                             role='train' if part == 'train' else 'test',
-                             options=ReaderOptions(**data['options']))
-
-
 KEYS = ('building_floor_accuracy', 'building_accuracy', 'cv_building_floor',
         'position_mean_error_m', 'position_median_error_m',
         'cv_position_mean_error_m', 'position_in_95_ellipse', 'epochs',
@@ -215,8 +206,8 @@ def run(args):
     results = {}
     for name in args.datasets:
         data = DATASETS[name]
-        train_fp, test_fp = _read(args.root, name, 'train'), \
-            _read(args.root, name, 'test')
+        train_fp, test_fp = read(args.root, name, 'train'), \
+            read(args.root, name, 'test')
         paths = {part: [str(args.root / p) for p in data[part]]
                  for part in ('train', 'test')}
         runs = {}
@@ -260,7 +251,7 @@ def cv(args):
     variants = json.loads(args.variants or '{"default": {}}')
     out = {}
     for name in args.datasets:
-        fp = _read(args.root, name, 'train')
+        fp = read(args.root, name, 'train')
         fp = fp.subset(~fp.empty_rows)
         classes, y = class_index(fp.building, fp.floor)
         for variant, overrides in variants.items():

@@ -3,20 +3,22 @@
 import math
 from pathlib import Path
 
+from conftest import dataset_file
 import numpy as np
 import pytest
 from wifi_place_recognition.core.artifact import (load_model, ModelFileError,
                                                   save_model)
-from wifi_place_recognition.core.coverage import (CoverageModel,
+from wifi_place_recognition.core.coverage import (COVERED_M, CoverageModel,
                                                   distance_by_place, FEATURES,
-                                                  one_sidedness)
-from wifi_place_recognition.core.evaluation import align
+                                                  one_sidedness, uncovered)
+from wifi_place_recognition.core.evaluation import align, unknown_aps
 from wifi_place_recognition.core.filter.particles import (FusionParams,
                                                           ParticleFilter)
 from wifi_place_recognition.core.filter.sensor import (WifiPosition,
                                                        WifiSensorModel)
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.training.coverage import (auc, fit_coverage,
+                                                      PRIOR_FLOOR,
                                                       reliability)
 
 ROBOT = Path(__file__).resolve().parents[2] / 'shared' / 'datasets' / \
@@ -90,6 +92,25 @@ def test_fit_learns_from_held_out_scans_and_reports_its_reliability():
                         log=lambda _: None) is None    # too few to learn
 
 
+@pytest.mark.parametrize('share', [0.5, 0.97])
+def test_the_prior_is_the_held_out_share_but_at_least_the_floor(share):
+    # the same separation at two shares covered: the odds of covered are
+    # those the examples show when above PRIOR_FLOOR, else PRIOR_FLOOR's
+    rng = np.random.default_rng(1)
+    covered = rng.random(4000) < share
+    x = rng.normal(size=(4000, len(FEATURES)))
+    x[:, 0] += np.where(covered, -1.0, 1.0)
+    model = fit_coverage(x, covered, np.arange(4000) % 4, log=lambda _: None)
+    prior = max(covered.mean(), PRIOR_FLOOR)
+    assert model.report['prior'] == pytest.approx(prior, abs=1e-4)
+    # on a balanced mixture of the two, the log-odds at the boundary
+    # feature value (0) are those of the prior
+    z = np.zeros((1, len(FEATURES)))
+    p = float(model.probability(z)[0])
+    assert math.log(p / (1 - p)) == pytest.approx(
+        math.log(prior / (1 - prior)), abs=0.2)
+
+
 def test_auc_and_reliability_are_what_they_say():
     assert auc([0.1, 0.2, 0.8, 0.9], [False, False, True, True]) == 1.0
     assert auc([0.5, 0.5], [False, True]) == 0.5
@@ -160,6 +181,24 @@ def test_train_model_learns_coverage_from_a_robot_run(tmp_path):
     middle = np.zeros(len(p_held), bool)
     middle[2 * n // 5 + 20:3 * n // 5 - 20] = True  # inside the hole
     assert p_held[middle].mean() < p_held[~middle].mean()
+
+
+def test_the_shipped_models_coverage_holds_on_another_days_scans():
+    # UJIIndoorLoc's public validation half, four months after the survey:
+    # covered when a training scan of its building/floor lies within 3 m
+    train = read_fingerprints(dataset_file('trainingData.csv'))
+    test = read_fingerprints(dataset_file('validationData-public.csv'),
+                             role='test')
+    model = load_model(SHIPPED)
+    p = model.predict_positions(align(model, test), coverage=True,
+                                unknown=unknown_aps(model, test))[3]
+    covered = distance_by_place(
+        test.position, np.column_stack([test.building, test.floor]),
+        train.position,
+        np.column_stack([train.building, train.floor])) <= COVERED_M
+    assert auc(p, covered) > 0.7                     # 0.744 measured
+    assert reliability(p, covered)[1] < 0.08         # ECE 0.058
+    assert uncovered(p).mean() < 0.05                # 0.5 % judged off
 
 
 @pytest.mark.parametrize('section, named', [

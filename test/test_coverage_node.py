@@ -1,18 +1,23 @@
 """Each scan's coverage on ~/place, over real ROS, as the core gives it."""
 
+from dataclasses import replace
 from pathlib import Path
 
 from conftest import python_module, run
 import numpy as np
 import pytest
 from ros_helpers import running_node
-from wifi_place_recognition.core.evaluation import align
+from wifi_place_recognition.core.evaluation import align, unknown_aps
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.ros.messages import status_values
 
 RUN = Path(__file__).resolve().parents[2] / 'shared' / 'datasets' / \
     'robot' / 'b24' / 'b24test2' / 'scans.csv'
 HOLE = (300, 450)   # scan rows cut out of the survey
+#: APs no survey scan heard, and the row (of ``rows`` below, one near
+#: the hole) sent again with them.
+NEW_APS = tuple(f'fe:ee:ee:ee:00:{k:02x}' for k in range(12))
+ROW_HEARD = 4
 
 
 @pytest.mark.skipif(not RUN.exists(), reason='robot runs not available')
@@ -47,6 +52,21 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
             knn.append(float(values['scan_knn_sigma_m']))
         np.testing.assert_allclose(got, expected[rows], atol=2e-3)
         assert all(0.0 <= p <= 1.0 for p in got)
+        # a scan that also heard APs the survey never did: judged alike
+        # offline (the APs the model lacks counted as the node counts them)
+        row = rows[ROW_HEARD]
+        detected = np.flatnonzero(np.isfinite(fp.rssi[row]))
+        status = client.resend_until_answered(client.scan(
+            [fp.ap_ids[j] for j in detected] + list(NEW_APS),
+            list(fp.rssi[row, detected]) + [-70.0] * len(NEW_APS)), 30)
+        louder = replace(fp, ap_ids=fp.ap_ids + NEW_APS, rssi=np.hstack(
+            [fp.rssi, np.full((len(fp), len(NEW_APS)), -70.0, np.float32)]))
+        heard = model.predict_positions(
+            align(model, louder), coverage=True,
+            unknown=unknown_aps(model, louder))[3][row]
+        assert abs(heard - expected[row]) > 0.1    # the count matters
+        assert float(status_values(status)['coverage']) == \
+            pytest.approx(heard, abs=2e-3)
         # the health counts the answers off the survey (these rows: some
         # in the hole, the others not; the probe), a scan answered twice
         # (sent again before its answer came back) twice

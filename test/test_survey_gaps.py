@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from wifi_place_recognition.cli.survey_gaps import main
 from wifi_place_recognition.cli.train_model import main as train
+from wifi_place_recognition.core.artifact import load_model, save_model
 from wifi_place_recognition.core.gaps import gaps
 
 RUN = Path(__file__).resolve().parents[2] / 'shared' / 'datasets' / \
@@ -65,7 +66,8 @@ def test_the_holes_of_the_survey_are_the_stretches_listed(holed, capsys,
     assert picture.stat().st_size > 1000
 
 
-def test_a_run_without_positions_needs_a_coverage_model(holed, capsys):
+def test_a_run_without_positions_needs_a_coverage_model(holed, capsys,
+                                                        tmp_path):
     model, run = holed
     assert main(['--model', str(model), '--data', str(run),
                  '--position-columns', 'none', '--json']) == 0
@@ -73,9 +75,30 @@ def test_a_run_without_positions_needs_a_coverage_model(holed, capsys):
                         pytest.fail(f'{c} is not JSON'))
     assert result['basis'] == 'model coverage probability < 0.5'
     assert all(s['length_m'] is None for s in result['stretches'])
-    # the shipped model has positions but no coverage section
-    assert main(['--data', str(run), '--position-columns', 'none']) == 2
+    # a model with positions but no coverage section
+    bare = load_model(model)
+    bare.coverage = None
+    save_model(bare, tmp_path / 'bare.npz')
+    assert main(['--model', str(tmp_path / 'bare.npz'), '--data', str(run),
+                 '--position-columns', 'none']) == 2
     assert 'no coverage section' in capsys.readouterr().err
+
+
+def test_a_run_the_model_knows_no_ap_of_is_off_the_survey(holed, capsys,
+                                                          tmp_path):
+    # the same run with every AP renamed: nothing the model heard
+    model, run = holed
+    header, *rows = run.read_text().splitlines(True)
+    renamed = tmp_path / 'elsewhere.csv'
+    renamed.write_text(','.join(
+        f'fe:ee:ee:ee:{k // 256:02x}:{k % 256:02x}' if name.count(':') == 5
+        else name for k, name in enumerate(header.rstrip('\n').split(',')))
+        + '\n' + ''.join(rows))
+    assert main(['--model', str(model), '--data', str(renamed),
+                 '--position-columns', 'none', '--json']) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result['scans_off_survey'] == result['scans'] == len(rows)
+    assert [s['scans'] for s in result['stretches']] == [len(rows)]
 
 
 def test_bad_arguments_are_refused_with_one_line(holed, capsys, tmp_path):

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.artifact import load_model
-from ..core.evaluation import align
+from ..core.evaluation import align, unknown_aps
 from ..core.coverage import (COVERED_M, OFF_SURVEY_BELOW,
                              distance_by_place, uncovered)
 from ..core.gaps import gaps
@@ -113,10 +113,11 @@ def off_survey(model, fp, covered_m):
     From positions when the run has them (the nearest survey scan the
     scan's building/floor searches, or the recognised one's when the
     model does not know it: its floor's, or its building's when the
-    model searches the building); else from the coverage probability.
+    model searches the building); else from the coverage probability,
+    read as the node reads it (a scan with no AP the model knows is off).
     """
-    rssi = align(model, fp)
-    proba, _, _, coverage = model.predict_positions(rssi, coverage=True)
+    proba, _, _, coverage = model.predict_positions(
+        align(model, fp), coverage=True, unknown=unknown_aps(model, fp))
     if fp.position is None:
         if model.coverage is None:
             raise ValueError('the run has no positions and the model no '

@@ -23,6 +23,17 @@ def align(onto, fp):
     return ScanMapper(onto.ap_ids).map_rows(fp.ap_ids, fp.rssi)
 
 
+def unknown_aps(onto, fp):
+    """
+    Return how many APs each scan of ``fp`` heard that ``onto`` lacks.
+
+    What the node counts as a scan's ``unknown_aps`` (and the coverage
+    features read), for rows :func:`align` maps.
+    """
+    lacking = ScanMapper(onto.ap_ids).columns(fp.ap_ids) < 0
+    return np.isfinite(fp.rssi[:, lacking]).sum(axis=1)
+
+
 def evaluate(model, fp):
     """
     Return accuracies, predictions and the confusion matrix.

@@ -155,13 +155,16 @@ class PlaceModel:
         """
         return self.scaler.transform(rssi, columns) - self.blank[columns]
 
-    def predict_positions(self, rssi, coverage=False, widened=True):
+    def predict_positions(self, rssi, coverage=False, widened=True,
+                          unknown=None):
         """
         Return (class probabilities, xy metres (n, 2), sigma metres (n,)).
 
         The batch form of :meth:`locate`: the sigma of the 95 % circle, or
         with ``widened`` false the k-NN's; with ``coverage``, each scan's
-        probability of being covered (n,) too.
+        probability of being covered (n,) too. ``unknown``: how many more
+        APs each scan heard that the model does not know (default none;
+        :func:`.evaluation.unknown_aps`).
 
         Raises ValueError for a model without a position output.
         """
@@ -172,10 +175,12 @@ class PlaceModel:
         best = proba.argmax(axis=1)
         xy = np.empty((len(best), 2))
         sigma, covered = np.empty(len(best)), np.full(len(best), np.nan)
+        unknown = np.zeros(len(best), np.int64) if unknown is None else \
+            np.asarray(unknown, np.int64)
         for i, (row, c) in enumerate(zip(np.asarray(rssi, np.float32), best)):
             columns = np.flatnonzero(~np.isnan(row))
             xy[i], circle, p, knn = self.locate(columns, row[columns], c,
-                                                coverage=coverage)
+                                                int(unknown[i]), coverage)
             sigma[i] = circle if widened else knn
             covered[i] = np.nan if p is None else p
         return (proba, xy, sigma) + ((covered,) if coverage else ())
@@ -189,14 +194,15 @@ class PlaceModel:
         sigma the one before. ``columns``/``rssi``: its APs known to the
         model and their readings (dBm); ``unknown``: how many more it
         heard. The probability is None without a coverage model (or
-        ``coverage`` false).
+        ``coverage`` false), and for a scan with no AP the model knows
+        (the node rejects such a scan; offline it is not judged).
         """
         locator = self.position
         distance = locator.distances(
             columns, signal(rssi, locator.representation), c)
         xy, knn = locator.weighted(distance, locator.neighbours, c)
         sigma = locator.widened(xy, knn, c)
-        if self.coverage is None or not coverage:
+        if self.coverage is None or not coverage or not len(columns):
             return xy, sigma, None, knn
         x = features(locator, distance, c,
                      unheard_share(locator, columns, c, unknown))

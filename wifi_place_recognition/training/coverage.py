@@ -9,7 +9,18 @@ answer shows. A logistic regression (scikit-learn) on them is the
 model; fitted on every fold but one and scored on that one, it reports
 how well it separates (ROC AUC) and whether its probability means what
 it says (reliability bins).
+
+The held-out stretches are cut out of the survey, so they lie off the
+rest of it far more often than a robot drives where nobody surveyed (a
+survey driven once: half of them). Its prior, the share of scans taken
+on covered ground, is therefore that of the held-out scans but at least
+:data:`PRIOR_FLOOR` (the regression's intercept moved by the log-odds
+between the two): on another day, a model that kept the cut's share
+called a third of the scans of a covered run off the survey
+(``benchmarks/coverage_check.py``).
 """
+
+import math
 
 import numpy as np
 
@@ -21,6 +32,8 @@ MIN_EXAMPLES = 20
 C = 1.0
 #: Reliability bins of the predicted probability.
 BINS = 5
+#: The least share of scans on covered ground the probability assumes.
+PRIOR_FLOOR = 0.9
 
 
 def _fit(x, y):
@@ -33,11 +46,15 @@ def _fit(x, y):
     return mean, scale, fit.coef_[0], float(fit.intercept_[0])
 
 
-def _model(params, report=None):
+def _model(params, report=None, prior_shift=0.0):
     mean, scale, coef, intercept = params
     return CoverageModel(tuple(map(float, mean)), tuple(map(float, scale)),
-                         tuple(map(float, coef)), intercept, FEATURES,
-                         report)
+                         tuple(map(float, coef)), intercept + prior_shift,
+                         FEATURES, report)
+
+
+def _logit(p):
+    return math.log(p / (1 - p))
 
 
 def auc(score, label):
@@ -80,8 +97,9 @@ def fit_coverage(x, covered, fold, log=print):
     Return a :class:`CoverageModel` fitted on held-out scans, or None.
 
     ``x`` (n, F): their features; ``covered``: their labels; ``fold``: the
-    fold that held each out. None (the filter then trusts every scan
-    alike) when either label has fewer than :data:`MIN_EXAMPLES` scans.
+    fold that held each out. Its prior: their share covered, at least
+    :data:`PRIOR_FLOOR`. None (the filter then trusts every scan alike)
+    when either label has fewer than :data:`MIN_EXAMPLES` scans.
     """
     ok = np.isfinite(x).all(axis=1)
     x, covered, fold = x[ok], np.asarray(covered, bool)[ok], fold[ok]
@@ -99,17 +117,22 @@ def fit_coverage(x, covered, fold, log=print):
             x[~rest])
     scored = np.isfinite(crossed)
     table, ece = reliability(crossed[scored], covered[scored])
+    share = n1 / (n1 + n0)
+    prior = max(share, PRIOR_FLOOR)
     report = {'held_out_scans': len(x), 'covered': n1, 'not_covered': n0,
               'cross_fitted_scans': int(scored.sum()),
               'auc': _rounded(auc(crossed[scored], covered[scored])),
               'ece': _rounded(ece), 'reliability': table,
+              'prior': _rounded(prior),
               'protocol': f'fitted on the held-out scans of every fold '
                           f'but one, scored on that one (labels: a kept '
-                          f'scan of the class within {COVERED_M:g} m)'}
+                          f'scan of the class within {COVERED_M:g} m), '
+                          f'at their own share covered; the model\'s '
+                          f'prior: that share, at least {PRIOR_FLOOR:g}'}
     log(f'coverage: {n1} held-out scans near a kept one, {n0} not; '
         f'cross-fitted ROC AUC {report["auc"]}, calibration error '
-        f'{report["ece"]}')
-    return _model(_fit(x, covered), report)
+        f'{report["ece"]}; prior P(covered) {report["prior"]}')
+    return _model(_fit(x, covered), report, _logit(prior) - _logit(share))
 
 
 def _rounded(value):

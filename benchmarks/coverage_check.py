@@ -1,0 +1,216 @@
+"""
+Whether the coverage model's probability holds on another day's scans.
+
+``train_model`` learns each model's coverage model from its own survey
+(held-out device, walk or time groups) and reports how it separates and
+how well calibrated it is on those held-out scans. This benchmark asks
+the same of each dataset's test file, recorded on another day: the model
+trained by the documented command (``train_model`` with the dataset's
+format flags only, ``--seed 0``; UJIIndoorLoc: the shipped model), its
+coverage probability of every test scan as the node computes it (the APs
+the model lacks counted), against whether a training scan of the scan's
+true building/floor lies within 3 m (the label ``train_model`` learns
+from). The robot pairs also with the fusion benchmark's survey holes
+(``fusion.survey``: pieces of the training run cut out). Per dataset:
+the share of test scans covered, the ROC AUC, the reliability table (5
+bins) and its expected calibration error (ECE), the share judged off the
+survey (below 0.5, or not judged: no AP the model knows) with how many
+of those are truly off (precision) and of the truly off how many are
+judged so (recall), beside the training's cross-fitted AUC and ECE; and
+the ECE and share judged off of the same model with the prior it learned
+from the held-out scans (``as_learned``: the share covered among them,
+before ``PRIOR_FLOOR``), and with other floors (``floors``); and the
+floor leave-one-building-out would choose by the ECE. One seed.
+
+    python benchmarks/coverage_check.py
+"""
+
+import argparse
+import json
+import math
+from pathlib import Path
+import tempfile
+
+import numpy as np
+from wifi_place_recognition.core.artifact import load_model
+from wifi_place_recognition.core.atomic import atomic_write
+from wifi_place_recognition.core.coverage import (COVERED_M,
+                                                  distance_by_place,
+                                                  uncovered)
+from wifi_place_recognition.core.evaluation import align, unknown_aps
+from wifi_place_recognition.core.resources import default_model_path
+from wifi_place_recognition.data.fingerprints import read_fingerprints
+from wifi_place_recognition.training.coverage import (auc, PRIOR_FLOOR,
+                                                      reliability)
+
+from datasets import DATASETS, PANEL, read, ROBOT
+from fusion import Run, survey
+from runs import measured, _cli
+
+ROOT = Path(__file__).resolve().parent.parent
+NAMES = PANEL + ('ujiindoorloc', 'wifine') + tuple(ROBOT)
+
+
+#: Other floors of the prior, scored beside the default's.
+FLOORS = (0.8, 0.85, 0.95, 0.99)
+
+
+def at_prior(p, report, floor=None):
+    """
+    Return ``p`` at another prior.
+
+    The held-out scans' own share covered (``floor`` None), or that
+    share but at least ``floor``.
+    """
+    share = report['covered'] / (report['covered'] + report['not_covered'])
+    prior = share if floor is None else max(share, floor)
+    z = np.log(p / (1 - p)) - _logit(report['prior']) + _logit(prior)
+    return 1 / (1 + np.exp(-z))
+
+
+def _logit(q):
+    return math.log(q / (1 - q))
+
+
+def check(model, train, test):
+    """Return the coverage model's figures on ``test`` (dict)."""
+    _, _, _, p = model.predict_positions(
+        align(model, test), coverage=True, unknown=unknown_aps(model, test))
+    place = np.column_stack([test.building, test.floor])
+    covered = distance_by_place(
+        test.position, place, train.position,
+        np.column_stack([train.building, train.floor])) <= COVERED_M
+    judged = np.isfinite(p)
+    table, ece = reliability(p[judged], covered[judged])
+    off = uncovered(p)
+    truly_off = ~covered
+    report = model.coverage.report
+
+    def scored(q):
+        return {'ece': reliability(q, covered[judged])[1],
+                'judged_off_share': float(
+                    (uncovered(q).sum() + (~judged).sum()) / len(p))}
+    return {
+        'test_scans': len(test), 'judged': int(judged.sum()),
+        'covered_share': float(covered.mean()),
+        'auc': _finite(auc(p[judged], covered[judged])), 'ece': ece,
+        'mean_probability': float(p[judged].mean()),
+        'judged_off_share': float(off.mean()),
+        'off_precision': float(truly_off[off].mean()) if off.any()
+        else None,
+        'off_recall': float(off[truly_off].mean()) if truly_off.any()
+        else None,
+        'reliability': table,
+        'cross_fitted_auc': report['auc'], 'cross_fitted_ece': report['ece'],
+        'prior': report['prior'],
+        'as_learned': scored(at_prior(p[judged], report)),
+        'floors': {f'{f:g}': scored(at_prior(p[judged], report, f))
+                   for f in FLOORS}}
+
+
+def leave_one_building_out(results):
+    """
+    Return, per building, the floor the others' mean ECE would choose.
+
+    Among the prior as learned, :data:`FLOORS` and the default; a
+    building: a dataset's name up to its first ``-`` (robot pairs and
+    their holes together).
+    """
+    def ece(r, floor):
+        if floor == 'as learned':
+            return r['as_learned']['ece']
+        return r['ece'] if floor == f'{PRIOR_FLOOR:g}' else \
+            r['floors'][floor]['ece']
+    scored = {k: r for k, r in results.items() if 'ece' in r}
+    options = ['as learned', f'{PRIOR_FLOOR:g}'] + [f'{f:g}' for f in FLOORS]
+    chosen = {}
+    for building in sorted({k.split('-')[0].split()[0] for k in scored}):
+        rest = [r for k, r in scored.items()
+                if k.split('-')[0].split()[0] != building]
+        chosen[building] = min(options, key=lambda f: np.mean(
+            [ece(r, f) for r in rest]))
+    return chosen
+
+
+def _finite(value):
+    """Return ``value``, None if NaN (JSON has no NaN)."""
+    return None if np.isnan(value) else value
+
+
+def _model(name, train, folder):
+    if name == 'ujiindoorloc':
+        return load_model(default_model_path()), 'the shipped model'
+    path = Path(folder) / f'{name}.npz'
+    measured(_cli('train_model') + [
+        '--data', *train, *DATASETS[name]['args'], '-o', path, '--seed', '0',
+        '--quiet'])
+    return load_model(path), 'train_model --seed 0'
+
+
+def _data(root, name, holes, folder):
+    """Return (training files, training scans, test scans)."""
+    if not holes:
+        files = [str(root / p) for p in DATASETS[name]['train']]
+        return files, read(root, name, 'train'), read(root, name, 'test')
+    run = Run((root / DATASETS[name]['train'][0]).parent)
+    scans = survey(run, folder, holes=True)[0]
+    return [str(scans)], read_fingerprints(scans), read(root, name, 'test')
+
+
+def _cell(value, fmt='.3f'):
+    return '-' if value is None else format(value, fmt)
+
+
+def main():
+    """Check every dataset's coverage model; print a table; write JSON."""
+    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    p.add_argument('--datasets-root', type=Path,
+                   default=ROOT.parent / 'shared' / 'datasets')
+    p.add_argument('--datasets', default=','.join(NAMES),
+                   help='comma-separated (default: every one)')
+    p.add_argument('--out', type=Path, default=ROOT / 'benchmarks' /
+                   'results' / 'coverage-check.json')
+    args = p.parse_args()
+    names = args.datasets.split(',')
+    unknown = sorted(set(names) - set(NAMES))
+    if unknown:
+        p.error(f'unknown datasets {unknown}; choose from {NAMES}')
+    results = {}
+    print(f'{"dataset":16s} {"scans":>6s} {"covered":>8s} {"AUC":>6s} '
+          f'{"ECE":>6s} {"off":>6s} {"prec":>6s} {"recall":>6s} '
+          f'{"cv AUC":>7s} {"cv ECE":>7s} {"prior":>6s} | as learned: '
+          f'{"ECE":>6s} {"off":>6s}')
+    with tempfile.TemporaryDirectory() as folder:
+        for name, holes in [(n, False) for n in names] + [
+                (n, True) for n in names if n in ROBOT]:
+            key = f'{name} holes' if holes else name
+            files, train, test = _data(args.datasets_root, name, holes,
+                                       folder)
+            model, basis = _model(name, files, folder)
+            if model.coverage is None:
+                results[key] = {'model': basis, 'coverage_model': None}
+                print(f'{key:16s} no coverage model')
+                continue
+            r = results[key] = {'model': basis, **check(model, train, test)}
+            print(f'{key:16s} {r["test_scans"]:6d} '
+                  f'{r["covered_share"]:8.3f} {_cell(r["auc"]):>6s} '
+                  f'{r["ece"]:6.3f} {r["judged_off_share"]:6.3f} '
+                  f'{_cell(r["off_precision"]):>6s} '
+                  f'{_cell(r["off_recall"]):>6s} '
+                  f'{_cell(r["cross_fitted_auc"]):>7s} '
+                  f'{_cell(r["cross_fitted_ece"]):>7s} {r["prior"]:6.3f} |'
+                  f' {"":11s} {r["as_learned"]["ece"]:6.3f} '
+                  f'{r["as_learned"]["judged_off_share"]:6.3f}')
+    out = {'protocol': __doc__.strip(), 'covered_m': COVERED_M,
+           'prior_floor': PRIOR_FLOOR, 'datasets': results,
+           'leave_one_building_out': leave_one_building_out(results)}
+    print('the floor leave-one-building-out would choose (mean ECE of the '
+          'other buildings):', ', '.join(
+              f'{k}: {v}' for k, v in out['leave_one_building_out'].items()))
+    with atomic_write(args.out, 'w') as f:
+        json.dump(out, f, indent=1, allow_nan=False)
+    print(f'wrote {args.out}')
+
+
+if __name__ == '__main__':
+    main()
