@@ -103,8 +103,8 @@ def test_the_prior_is_the_held_out_share_but_at_least_the_floor(share):
     model = fit_coverage(x, covered, np.arange(4000) % 4, log=lambda _: None)
     prior = max(covered.mean(), PRIOR_FLOOR)
     assert model.report['prior'] == pytest.approx(prior, abs=1e-4)
-    # on a balanced mixture of the two, the log-odds at the boundary
-    # feature value (0) are those of the prior
+    # where a covered and an uncovered scan are alike likely (feature 0),
+    # the log-odds are the prior's
     z = np.zeros((1, len(FEATURES)))
     p = float(model.probability(z)[0])
     assert math.log(p / (1 - p)) == pytest.approx(
