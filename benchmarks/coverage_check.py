@@ -45,7 +45,7 @@ from wifi_place_recognition.training.coverage import (auc, PRIOR_FLOOR,
 
 from datasets import DATASETS, PANEL, read, ROBOT
 from fusion import Run, survey
-from runs import measured, _cli
+from runs import command, measured
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = PANEL + ('ujiindoorloc', 'wifine') + tuple(ROBOT)
@@ -112,9 +112,9 @@ def leave_one_building_out(results):
     """
     Return, per building, the floor the others' mean ECE would choose.
 
-    Among the prior as learned, :data:`FLOORS` and the default; a
-    building: a dataset's name up to its first ``-`` (robot pairs and
-    their holes together).
+    Among the prior as learned, :data:`FLOORS` and the default (None
+    with no other building); a building: a dataset's name up to its
+    first ``-`` (robot pairs and their holes together).
     """
     def ece(r, floor):
         if floor == 'as learned':
@@ -128,7 +128,7 @@ def leave_one_building_out(results):
         rest = [r for k, r in scored.items()
                 if k.split('-')[0].split()[0] != building]
         chosen[building] = min(options, key=lambda f: np.mean(
-            [ece(r, f) for r in rest]))
+            [ece(r, f) for r in rest])) if rest else None
     return chosen
 
 
@@ -141,7 +141,7 @@ def _model(name, train, folder):
     if name == 'ujiindoorloc':
         return load_model(default_model_path()), 'the shipped model'
     path = Path(folder) / f'{name}.npz'
-    measured(_cli('train_model') + [
+    measured(command('train_model') + [
         '--data', *train, *DATASETS[name]['args'], '-o', path, '--seed', '0',
         '--quiet'])
     return load_model(path), 'train_model --seed 0'

@@ -29,7 +29,8 @@ def measured(argv):
     return stdout, seconds, usage.ru_maxrss / 1024
 
 
-def _cli(name):
+def command(name):
+    """Return the argv that runs the package's command line tool ``name``."""
     return [sys.executable, '-m', f'wifi_place_recognition.cli.{name}']
 
 
@@ -42,11 +43,11 @@ def train_and_test(flags, seed, train, test, data_args, folder):
     """
     model = Path(folder) / f'model-{seed}.npz'
     _, seconds, peak = measured(
-        _cli('train_model') + ['--data', *train, *data_args, '-o', model,
-                               '--seed', str(seed), '--quiet', *flags])
+        command('train_model') + ['--data', *train, *data_args, '-o', model,
+                                  '--seed', str(seed), '--quiet', *flags])
     stdout, _, _ = measured(
-        _cli('evaluate_model') + ['--model', model, '--data', *test,
-                                  *data_args, '--json'])
+        command('evaluate_model') + ['--model', model, '--data', *test,
+                                     *data_args, '--json'])
     result = json.loads(stdout)
     result.pop('confusion')
     provenance = load_model(model).provenance
