@@ -96,9 +96,17 @@ def test_a_run_the_model_knows_no_ap_of_is_off_the_survey(holed, capsys,
         + '\n' + ''.join(rows))
     assert main(['--model', str(model), '--data', str(renamed),
                  '--position-columns', 'none', '--json']) == 0
-    result = json.loads(capsys.readouterr().out)
+    out, err = capsys.readouterr()
+    result = json.loads(out)
     assert result['scans_off_survey'] == result['scans'] == len(rows)
     assert [s['scans'] for s in result['stretches']] == [len(rows)]
+    # and the user is told why, not only that
+    assert result['scans_without_known_ap'] == len(rows)
+    assert f'{len(rows)} of {len(rows)} scans share no AP with the model' \
+        in err
+    assert main(['--model', str(model), '--data', str(run), '--json']) == 0
+    assert json.loads(capsys.readouterr().out)[
+        'scans_without_known_ap'] == 0
 
 
 def test_bad_arguments_are_refused_with_one_line(holed, capsys, tmp_path):

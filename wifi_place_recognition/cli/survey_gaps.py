@@ -3,6 +3,7 @@
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -70,10 +71,15 @@ def main(argv=None):
     result = {'source': fp.source, 'basis': found['basis'],
               'covered_m': args.covered_m, 'scans': len(fp),
               'scans_off_survey': int(found['off'].sum()),
+              'scans_without_known_ap': found['strangers'],
               'stretches': [{'start_s': g.start_s - t0,
                              'end_s': g.end_s - t0, 'scans': g.scans,
                              'length_m': g.length_m, 'from_xy': g.start_xy,
                              'to_xy': g.end_xy} for g in stretches]}
+    if found['strangers']:
+        print(f'note: {found["strangers"]} of {len(fp)} scans share no AP '
+              f'with the model (a scan the node would reject): is it this '
+              f'building\'s model?', file=sys.stderr)
     if args.plot:
         _plot(args.plot, model, fp.position, found['off'], stretches, order)
     if args.json:
@@ -108,16 +114,19 @@ def _finite(value):
 
 def off_survey(model, fp, covered_m):
     """
-    Return {'off': bool per scan, 'basis': how it was judged}.
+    Return {'off': bool per scan, 'basis': ..., 'strangers': ...}.
 
-    From positions when the run has them (the nearest survey scan the
+    ``basis``: how the scans were judged; ``strangers``: how many share
+    no AP with the model. From positions when the run has them (the nearest survey scan the
     scan's building/floor searches, or the recognised one's when the
     model does not know it: its floor's, or its building's when the
     model searches the building); else from the coverage probability,
     read as the node reads it (a scan with no AP the model knows is off).
     """
+    rssi = align(model, fp)
+    strangers = int((~np.isfinite(rssi).any(axis=1) & ~fp.empty_rows).sum())
     proba, _, _, coverage = model.predict_positions(
-        align(model, fp), coverage=True, unknown=unknown_aps(model, fp))
+        rssi, coverage=True, unknown=unknown_aps(model, fp))
     if fp.position is None:
         if model.coverage is None:
             raise ValueError('the run has no positions and the model no '
@@ -126,7 +135,7 @@ def off_survey(model, fp, covered_m):
                              'the run with a pose topic, or retrain')
         return {'off': uncovered(coverage),
                 'basis': f'model coverage probability < '
-                         f'{OFF_SURVEY_BELOW:g}'}
+                         f'{OFF_SURVEY_BELOW:g}', 'strangers': strangers}
     locator = model.position
     index = {tuple(c): i for i, c in enumerate(model.classes.tolist())}
     label = np.array([index.get((int(b), int(f)), -1) for b, f in
@@ -139,7 +148,8 @@ def off_survey(model, fp, covered_m):
         np.repeat(searched, [len(xy) for xy in survey]))
     return {'off': ~(distance <= covered_m) & np.isfinite(
         fp.position).all(axis=1),
-        'basis': f'no survey scan within {covered_m:g} m'}
+        'basis': f'no survey scan within {covered_m:g} m',
+        'strangers': strangers}
 
 
 def _plot(path, model, xy, off, stretches, order):
