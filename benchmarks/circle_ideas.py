@@ -37,7 +37,6 @@ P(covered) of those the default circle misses and holds. Table on stdout, JSON i
 
 import argparse
 import json
-import math
 from pathlib import Path
 import sys
 import tempfile
@@ -53,7 +52,7 @@ from wifi_place_recognition.core.locator import (
     calibrated_edge_sigma, EDGE_POWER, least_widening, Locator, R95)
 from wifi_place_recognition.core.preprocessing import signal
 from wifi_place_recognition.data.fingerprints import read_fingerprints
-from wifi_place_recognition.training.coverage import auc
+from wifi_place_recognition.training.coverage import auc, logit
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fusion as fb  # noqa: E402  (the fusion benchmark's protocol)
@@ -114,11 +113,6 @@ def cut_examples(model, survey_csv, seed=0):
     x, answers = np.array(x), np.array(answers)
     ok = np.isfinite(x).all(axis=1) & np.isfinite(answers).all(axis=1)
     return x[ok], np.concatenate(covered)[ok], *answers[ok].T
-
-
-def logit(p):
-    """Return log(p / (1 - p))."""
-    return math.log(p / (1 - p))
 
 
 def pair(model, survey_csv, test, kept):

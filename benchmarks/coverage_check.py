@@ -27,7 +27,6 @@ floor leave-one-building-out would choose by the ECE. One seed.
 
 import argparse
 import json
-import math
 from pathlib import Path
 import tempfile
 
@@ -40,7 +39,8 @@ from wifi_place_recognition.core.coverage import (COVERED_M,
 from wifi_place_recognition.core.evaluation import align, unknown_aps
 from wifi_place_recognition.core.resources import default_model_path
 from wifi_place_recognition.data.fingerprints import read_fingerprints
-from wifi_place_recognition.training.coverage import (auc, PRIOR_FLOOR,
+from wifi_place_recognition.training.coverage import (auc, logit,
+                                                      PRIOR_FLOOR,
                                                       reliability)
 
 from datasets import DATASETS, PANEL, read, ROBOT
@@ -64,12 +64,8 @@ def at_prior(p, report, floor=None):
     """
     share = report['covered'] / (report['covered'] + report['not_covered'])
     prior = share if floor is None else max(share, floor)
-    z = np.log(p / (1 - p)) - _logit(report['prior']) + _logit(prior)
+    z = np.log(p / (1 - p)) - logit(report['prior']) + logit(prior)
     return 1 / (1 + np.exp(-z))
-
-
-def _logit(q):
-    return math.log(q / (1 - q))
 
 
 def check(model, train, test):

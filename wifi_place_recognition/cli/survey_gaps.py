@@ -117,11 +117,12 @@ def off_survey(model, fp, covered_m):
     Return {'off': bool per scan, 'basis': ..., 'strangers': ...}.
 
     ``basis``: how the scans were judged; ``strangers``: how many share
-    no AP with the model. From positions when the run has them (the nearest survey scan the
-    scan's building/floor searches, or the recognised one's when the
-    model does not know it: its floor's, or its building's when the
-    model searches the building); else from the coverage probability,
-    read as the node reads it (a scan with no AP the model knows is off).
+    no AP with the model. From positions when the run has them (the
+    nearest survey scan the scan's building/floor searches, or the
+    recognised one's when the model does not know it: its floor's, or
+    its building's when the model searches the building); else from the
+    coverage probability, read as the node reads it (a scan with no AP
+    the model knows is off).
     """
     rssi = align(model, fp)
     strangers = int((~np.isfinite(rssi).any(axis=1) & ~fp.empty_rows).sum())

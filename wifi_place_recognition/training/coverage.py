@@ -53,7 +53,8 @@ def _model(params, report=None, prior_shift=0.0):
                          FEATURES, report)
 
 
-def _logit(p):
+def logit(p):
+    """Return log(p / (1 - p)): the log-odds of a share ``p`` in (0, 1)."""
     return math.log(p / (1 - p))
 
 
@@ -132,7 +133,7 @@ def fit_coverage(x, covered, fold, log=print):
     log(f'coverage: {n1} held-out scans near a kept one, {n0} not; '
         f'cross-fitted ROC AUC {report["auc"]}, calibration error '
         f'{report["ece"]}; prior P(covered) {report["prior"]}')
-    return _model(_fit(x, covered), report, _logit(prior) - _logit(share))
+    return _model(_fit(x, covered), report, logit(prior) - logit(share))
 
 
 def _rounded(value):
