@@ -65,7 +65,7 @@ from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.coverage import (COVERED_M,
                                                   distance_to_survey)
-from wifi_place_recognition.core.evaluation import align
+from wifi_place_recognition.core.evaluation import align, unknown_aps
 from wifi_place_recognition.core.filter.trajectory import (fuse_offline,
                                                            score, truth_at)
 from wifi_place_recognition.core.filter.fusion import Fusion
@@ -134,11 +134,13 @@ def working_streams(model, run):
     """
     Return W's scan stream, fused stream (seed 0) and places.
 
-    The scans' k-NN sigma, as the monitor reads it (not widened).
+    The scans' k-NN sigma, as the monitor reads it (not widened), and
+    their coverage probability (the APs the model lacks counted).
     """
-    proba, xy, sigma = model.predict_positions(align(model, run.fp),
-                                               widened=False)
-    scans = (run.stamps, xy, sigma)
+    proba, xy, sigma, coverage = model.predict_positions(
+        align(model, run.fp), coverage=True, widened=False,
+        unknown=unknown_aps(model, run.fp))
+    scans = (run.stamps, xy, sigma, coverage)
     fxy, fyaw, fcov = fuse_offline(run.odometry, scans,
                                    Fusion(model.fusion, seed=0))
     places = [model.classes[c] for c in proba.argmax(axis=1)]

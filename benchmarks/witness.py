@@ -30,6 +30,11 @@ protocol: ``benchmarks/fusion.py``'s survey_holes).
 - start-up: the localiser never publishes; the delay from the first scan
   to the first seed, and its error.
 
+Each scan reaches the witness as classifier_node sends it to the monitor:
+its position, k-NN sigma and coverage probability (the APs the model
+lacks counted). A scan wider than max_scan_sigma testifies only where
+its coverage probability says it is on the survey.
+
 Every building's runs are scored with the node's defaults (any folder of
 runs, one building too: ``fusion.py``'s ``--data``). With two buildings or
 more, the thresholds (agree_sigmas, alarm, floor_sd, max_scan_sigma,
@@ -59,7 +64,7 @@ import sys
 import numpy as np
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
-from wifi_place_recognition.core.evaluation import align
+from wifi_place_recognition.core.evaluation import align, unknown_aps
 from wifi_place_recognition.core.filter.angles import wrap
 from wifi_place_recognition.core.filter.fusion import (compose, Fusion,
                                                        relative)
@@ -158,14 +163,17 @@ def train(test, others, folder, with_holes):
 
 def scan_stream(model, run):
     """
-    Return the scans' own positions: (t, xy (n, 2), sigma (n,)).
+    Return the scans' own positions: (t, xy (n, 2), sigma (n,), coverage).
 
     The k-NN's sigma, as classifier_node gives it to the monitor
-    (``scan_knn_sigma_m``), not widened at the survey's edge.
+    (``scan_knn_sigma_m``), not widened at the survey's edge, and the
+    coverage probability (NaN without a coverage model), the APs the
+    model lacks counted as the node counts them.
     """
-    _, xy, sigma = model.predict_positions(align(model, run.fp),
-                                           widened=False)
-    return run.stamps, xy, sigma
+    _, xy, sigma, coverage = model.predict_positions(
+        align(model, run.fp), coverage=True, widened=False,
+        unknown=unknown_aps(model, run.fp))
+    return run.stamps, xy, sigma, coverage
 
 
 def survey(model):
@@ -269,8 +277,8 @@ class Case:
         ia, ib = a.stamps < t0, b.stamps >= cut_b
         stamps = np.concatenate([a.stamps[ia], b.stamps[ib] + shift])
         sa, sb = scan_stream(model, a), scan_stream(model, b)
-        scans = (stamps, np.concatenate([sa[1][ia], sb[1][ib]]),
-                 np.concatenate([sa[2][ia], sb[2][ib]]))
+        scans = (stamps, *(np.concatenate([a_[ia], b_[ib]])
+                           for a_, b_ in zip(sa[1:], sb[1:])))
         fused = fused_stream(model, scans, odometry, seed)
         truth_b = read_poses(b.folder / 'poses.csv')
         truth_b[:, 0] += shift

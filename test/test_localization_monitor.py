@@ -283,7 +283,7 @@ def test_with_no_localiser_pose_the_sure_fused_pose_seeds_it(monitor, ros):
     assert m.verdicts == [False]
 
 
-def place_answer(t, xy, sigma, knn_sigma=None):
+def place_answer(t, xy, sigma, knn_sigma=None, coverage=None):
     """Return a ~/place answer as classifier_node sends it (some keys)."""
     values = [key_value('building', 0), key_value('floor', 0),
               key_value('scan_x', f'{xy[0]:.3f}'),
@@ -291,6 +291,8 @@ def place_answer(t, xy, sigma, knn_sigma=None):
               key_value('scan_sigma_m', f'{sigma:.3f}')]
     if knn_sigma is not None:
         values.append(key_value('scan_knn_sigma_m', f'{knn_sigma:.3f}'))
+    if coverage is not None:
+        values.append(key_value('coverage', f'{coverage:.4f}'))
     msg = DiagnosticArray(status=[DiagnosticStatus(
         name='classifier_node: place', values=values)])
     msg.header.stamp.sec = int(t)
@@ -320,6 +322,33 @@ def test_scans_far_from_a_surveyed_localiser_pose_tell_a_kidnap(
     values = m.latest_status()
     assert 'from the WiFi scans' in values['reason'], values
     assert int(values['scans']) == 40
+
+
+def test_a_wide_scan_testifies_when_its_coverage_says_on_the_survey(
+        monitor, ros):
+    # as the kidnap above, the scans wider than max_scan_sigma: their
+    # coverage probability decides (likely off the survey, they testify
+    # nothing; likely on it, they do)
+    here, m, answers = surveyed_monitor(monitor, ros, 'coverage_monitor')
+    refs = survey_of(load_model(default_model_path()), 'map')['map']
+    distance = np.linalg.norm(refs - here, axis=1)
+    far = refs[np.flatnonzero((distance > 20) & (distance < 30))[0]]
+    for k in range(30):
+        m.send_local(pose(T0 + k, *here, 0.0))
+        answers.publish(place_answer(T0 + k, far, 3.5, coverage=0.1))
+        m.spin()
+    m.wait_state('cannot_tell')
+    values = m.latest_status()
+    assert values['reason'] == 'scan off the survey (sigma 3.5 m, ' \
+        'coverage 0.10)', values
+    for k in range(30, 90):     # each 5 sigma off: lost in about 30 s
+        m.send_local(pose(T0 + k, *here, 0.0))
+        answers.publish(place_answer(T0 + k, far, 3.5, coverage=0.9))
+        m.spin()
+    m.wait_state('lost')
+    ros.destroy_publisher(answers)
+    assert m.verdicts == [False, True, False], m.verdicts
+    assert 'from the WiFi scans' in m.latest_status()['reason']
 
 
 def test_bad_localiser_messages_are_counted_named_and_left_out(

@@ -137,6 +137,39 @@ def test_scans_testify_only_on_the_survey_and_when_sure():
     assert w.ok and w.evidence['fused'] == 0
 
 
+def test_a_wide_scan_testifies_when_its_coverage_says_on_the_survey():
+    survey = {'map': np.column_stack([np.arange(0, 50, 0.5),
+                                      np.zeros(100)])}
+    p = WitnessParams()
+
+    def scans(sigma, coverage):
+        """Localiser at the truth, scans 30 m off it."""
+        w = Witness(p, survey)
+        for k in range(40):
+            xy, yaw = truth(k)
+            w.localiser(k, 'map', xy, yaw, cov(0.1))
+            w.scan(k, 'map', xy + [0, 30.0], sigma, coverage)
+        return w
+    wide = p.max_scan_sigma + 1
+    # a wide scan likely off the survey: no evidence
+    w = scans(wide, 0.2)
+    assert w.ok and w.evidence['scans'] == 0
+    assert w.last.reason == 'scan off the survey (sigma 4.0 m, coverage 0.20)'
+    # a wide scan likely on it testifies
+    assert scans(wide, 0.9).ok is False
+    # the probability alone silences no scan: a sure one testifies
+    assert scans(1.5, 0.2).ok is False
+    # no probability (a model without a coverage model): the sigma rule
+    w = scans(wide, math.nan)
+    assert w.ok and w.last.reason == 'scan off the survey (sigma 4.0 m)'
+    assert scans(1.5, math.nan).ok is False
+    # a probability outside 0-1 is refused, like a scan that is not finite
+    for coverage in (-0.1, 1.5, math.inf):
+        assert Witness(p, survey).scan(0, 'map', [0, 0], 1.5,
+                                       coverage) is None
+    assert Witness(p, survey).scan(0, 'map', [0, 0], 1.5, 1.0) is not None
+
+
 def test_a_silent_localiser_is_lost_only_if_the_robot_moved():
     p = WitnessParams()
     w = Witness(p)

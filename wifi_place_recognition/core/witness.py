@@ -22,7 +22,8 @@ evidence:
   to the nearest surveyed place and may drag the filter with them;
 - the scans: the same with the scan's own sigma and ``scan_floor_sd``, and
   only a scan that testifies (:func:`.witness_testimony.scan_doubt`: its
-  sigma up to ``max_scan_sigma``) where the survey covers the localiser's
+  sigma up to ``max_scan_sigma``, or its coverage probability says it is
+  on the survey) where the survey covers the localiser's
   position (a reference within ``coverage_m``): a scan taken far from the
   survey snaps to the nearest surveyed place, so there it testifies
   nothing. The scans do not wait for the filter, which follows a
@@ -159,15 +160,18 @@ class Witness:
         self.last = judgement
         return judgement
 
-    def scan(self, stamp, frame, xy, sigma):
+    def scan(self, stamp, frame, xy, sigma, coverage=math.nan):
         """
         Take one scan's own position and sigma (m); return a Judgement.
 
-        None if none is due, or the scan is not finite.
+        ``coverage``: its coverage probability (NaN or None: none). None
+        if no judgement is due, or the scan is not valid
+        (:func:`.witness_inputs.scan_is_valid`).
         """
-        if not scan_is_valid(stamp, xy, sigma):
+        coverage = math.nan if coverage is None else float(coverage)
+        if not scan_is_valid(stamp, xy, sigma, coverage):
             return None
-        doubt = scan_doubt(sigma, self.params)
+        doubt = scan_doubt(sigma, coverage, self.params)
         self.recent.append(not doubt)
         if not self.streams.due('scans', stamp, self.params.period):
             return None

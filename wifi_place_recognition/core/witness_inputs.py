@@ -64,8 +64,12 @@ def pose_problem(stamp, xy, yaw, cov):
     return None
 
 
-def scan_is_valid(stamp, xy, sigma):
-    """Return True if a scan's stamp, x, y and sigma (m, >= 0) are finite."""
+def scan_is_valid(stamp, xy, sigma, coverage=math.nan):
+    """
+    Return True if a scan's stamp, x, y and sigma (m, >= 0) are finite.
+
+    Its coverage probability too must lie in 0-1, or be NaN (none).
+    """
     values = [stamp, *np.ravel(xy), sigma]
     return len(values) == 4 and all(map(math.isfinite, values)) and \
-        sigma >= 0
+        sigma >= 0 and (math.isnan(coverage) or 0 <= coverage <= 1)

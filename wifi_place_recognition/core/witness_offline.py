@@ -10,11 +10,13 @@ def replay(localiser, fused, params=None, frame='map', scans=None,
 
     ``localiser`` and ``fused``: (stamps (n,), xy (n, 2), yaw (n,),
     cov (n, 3, 3)) in stamp order, in ``frame`` (``localiser`` may be
-    None: it never published); ``scans``: (stamps, xy, sigma) or None;
-    ``survey``: the surveyed positions (None: everywhere). Taken in stamp
-    order (the localiser's first, then the scans', at equal stamps); rows
-    with NaN are skipped. Every seed proposed is sent. Yield (stamp,
-    judgement or None, the witness's state after it) for every event.
+    None: it never published); ``scans``: (stamps, xy, sigma[, coverage])
+    or None; ``survey``: the surveyed positions (None: everywhere). Taken
+    in stamp order (the localiser's first, then the scans', at equal
+    stamps); rows the witness refuses (a NaN but the coverage, a coverage
+    outside 0-1) are skipped.
+    Every seed proposed is sent. Yield (stamp, judgement or None, the
+    witness's state after it) for every event.
     """
     witness = Witness(params, None if survey is None else {frame: survey})
     events = [(float(t), 2, i) for i, t in enumerate(fused[0])]
@@ -31,8 +33,8 @@ def replay(localiser, fused, params=None, frame='map', scans=None,
             judgement = witness.fused(stamp, frame, fused[1][i],
                                       fused[2][i], fused[3][i])
         else:
-            judgement = witness.scan(stamp, frame, scans[1][i],
-                                     scans[2][i])
+            judgement = witness.scan(stamp, frame, *(s[i] for s in
+                                                     scans[1:]))
         if judgement is not None and judgement.seed:
             witness.seeded(stamp)
         yield stamp, judgement, witness.state

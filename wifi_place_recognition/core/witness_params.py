@@ -27,6 +27,8 @@ class WitnessParams:
     coverage_m: float = 2.0        # m: scans testify within this of the survey
     max_scan_sigma: float = 3.0    # m: recent scans wider: the robot is off
     #                                the survey, the fused pose no evidence
+    #                                (unless their coverage probability says
+    #                                they are on it)
     agree_sigmas: float = 3.0      # a judgement this far apart is neutral
     max_step: float = 10.0         # most evidence one judgement adds
     alarm: float = 60.0            # evidence at which the localiser is lost

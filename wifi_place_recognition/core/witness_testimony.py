@@ -2,9 +2,10 @@
 What each witness testifies, and how far apart it says the localiser is.
 
 A scan testifies when :func:`scan_doubt` has nothing against it (its
-sigma up to ``max_scan_sigma``: a scan unlike every surveyed one, the
-k-NN's sigma grows with that, snaps to the nearest surveyed place) and
-the survey covers the localiser's position (:func:`covered`). The
+sigma up to ``max_scan_sigma``, or its coverage probability says it was
+taken on the survey: a scan unlike every surveyed one, the k-NN's sigma
+grows with that, snaps to the nearest surveyed place) and the survey
+covers the localiser's position (:func:`covered`). The
 distances are Mahalanobis distances under the sum of both covariances,
 plus floors for what neither knows and the distance the robot moved since
 the localiser's stamp (ROS-free).
@@ -14,19 +15,30 @@ import math
 
 import numpy as np
 
+from .coverage import uncovered
 from .filter.angles import wrap
 from .filter.particles import UNKNOWN_VARIANCE
 
 
-def scan_doubt(sigma, params):
+def scan_doubt(sigma, coverage, params):
     """
-    Return why a scan with this sigma (m) does not testify, or ''.
+    Return why a scan does not testify, or ''.
 
     The one rule for which scans testify (a scan's own, whatever the
-    localiser's pose): a scan too unlike every surveyed one.
+    localiser's pose): a scan off the survey, its k-NN sigma (m) above
+    ``max_scan_sigma`` (a scan unlike every surveyed one: the sigma grows
+    with that), unless its coverage probability (NaN: the model has no
+    coverage model) says it was taken on the survey
+    (:func:`.coverage.uncovered`). The probability alone silences no
+    scan: it calls right scans at a hole's edge off the survey.
     """
-    if sigma > params.max_scan_sigma:
+    if sigma <= params.max_scan_sigma:
+        return ''
+    if math.isnan(coverage):
         return f'scan off the survey (sigma {sigma:.1f} m)'
+    if uncovered(coverage):
+        return (f'scan off the survey (sigma {sigma:.1f} m, coverage '
+                f'{coverage:.2f})')
     return ''
 
 

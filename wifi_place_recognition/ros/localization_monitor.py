@@ -3,15 +3,16 @@
 
 Subscribes the localiser's pose (``localizer_topic``, e.g. AMCL's
 ``amcl_pose``), classifier_node's fused pose (``fused_topic``) and its
-answers (``place_topic``: each scan's own position and sigma), and feeds
-them to :class:`.core.witness.Witness`, which judges whether they agree
-(see there). Publishes its state on the latched ``~/status``
-(``std_msgs/String``: ``agrees``, ``disagrees`` (evidence gathering,
-not yet lost), ``cannot_tell``, ``lost``, or ``waiting`` before the
-localiser's first pose) and the verdict on the latched
-``~/localization_ok`` (``std_msgs/Bool``: true while the localiser is not
-known to be lost: agrees, disagrees or cannot tell; false when lost or
-before its first pose), each once per change and logged; a status on
+answers (``place_topic``: each scan's own position, sigma and coverage
+probability), and feeds them to :class:`.core.witness.Witness`, which
+judges whether they agree (see there). Publishes its state on the
+latched ``~/status`` (``std_msgs/String``: ``agrees``, ``disagrees``
+(evidence gathering, not yet lost), ``cannot_tell``, ``lost``, or
+``waiting`` before the localiser's first pose) and the verdict on the
+latched ``~/localization_ok`` (``std_msgs/Bool``: true while the
+localiser is not known to be lost: agrees, disagrees or cannot tell;
+false when lost or before its first pose), each once per change and
+logged; a status on
 ``/diagnostics`` every second and at once on a change of state; and with
 ``initial_pose_on_lost`` the fused pose (as classifier_node published it:
 its frame, pose and covariance) on ``initialpose`` at start-up and when
@@ -252,6 +253,8 @@ class LocalizationMonitor(Node):
                 # (a node before round 9 sends only scan_sigma_m, the same)
                 sigma = float(values.get('scan_knn_sigma_m',
                                          values['scan_sigma_m']))
+                # NaN: the model has no coverage model
+                coverage = float(values.get('coverage', 'nan'))
                 frame = self.frame_id.format(
                     building=int(values['building']),
                     floor=int(values['floor']))
@@ -259,7 +262,7 @@ class LocalizationMonitor(Node):
                 continue        # a rejected scan, or no position
             self.counts['scans'] += 1
             if self.witness.scan(seconds(msg.header.stamp), frame, xy,
-                                 sigma) is not None:
+                                 sigma, coverage) is not None:
                 self._update()
 
     # outputs --------------------------------------------------------------

@@ -98,8 +98,9 @@ PARAMETERS = (
     _positive('scan_floor_sd', 'the same for a scan\'s own position (m)',
               _D.scan_floor_sd, 100.0),
     _positive('max_scan_sigma', 'scans with a larger sigma (m) are off the '
-              'survey: no evidence, nor is the fused pose while the recent '
-              'scans are so', _D.max_scan_sigma, 1000.0),
+              'survey unless their coverage probability is 0.5 or more: no '
+              'evidence, nor is the fused pose while the recent scans are '
+              'so', _D.max_scan_sigma, 1000.0),
     _positive('yaw_floor_deg', 'degrees added to both yaw deviations',
               round(math.degrees(_D.yaw_floor_sd), 6), 180.0),
     _positive('sure_sd', 'a fused pose this sure (m, largest standard '
