@@ -291,8 +291,9 @@ def place_answer(t, xy, sigma, knn_sigma=None, coverage=None):
               key_value('scan_sigma_m', f'{sigma:.3f}')]
     if knn_sigma is not None:
         values.append(key_value('scan_knn_sigma_m', f'{knn_sigma:.3f}'))
-    if coverage is not None:
-        values.append(key_value('coverage', f'{coverage:.4f}'))
+    if coverage is not None:       # a number, or a string as it is sent
+        values.append(key_value('coverage', coverage if isinstance(
+            coverage, str) else f'{coverage:.4f}'))
     msg = DiagnosticArray(status=[DiagnosticStatus(
         name='classifier_node: place', values=values)])
     msg.header.stamp.sec = int(t)
@@ -328,7 +329,7 @@ def test_a_wide_scan_testifies_when_its_coverage_says_on_the_survey(
         monitor, ros):
     # as the kidnap above, the scans wider than max_scan_sigma: their
     # coverage probability decides (likely off the survey, they testify
-    # nothing; likely on it, they do)
+    # nothing; likely on it, they do; not a probability: refused, counted)
     here, m, answers = surveyed_monitor(monitor, ros, 'coverage_monitor')
     refs = survey_of(load_model(default_model_path()), 'map')['map']
     distance = np.linalg.norm(refs - here, axis=1)
@@ -337,18 +338,25 @@ def test_a_wide_scan_testifies_when_its_coverage_says_on_the_survey(
         m.send_local(pose(T0 + k, *here, 0.0))
         answers.publish(place_answer(T0 + k, far, 3.5, coverage=0.1))
         m.spin()
-    m.wait_state('cannot_tell')
-    values = m.latest_status()
-    assert values['reason'] == 'scan off the survey (sigma 3.5 m, ' \
-        'coverage 0.10)', values
+    off = 'scan off the survey (sigma 3.5 m, coverage 0.10)'
+    assert wait_until(lambda: m.latest_status()['reason'] == off, 30, ros)
+    assert m.states[-1] == 'cannot_tell', m.states
     for k in range(30, 90):     # each 5 sigma off: lost in about 30 s
         m.send_local(pose(T0 + k, *here, 0.0))
         answers.publish(place_answer(T0 + k, far, 3.5, coverage=0.9))
         m.spin()
     m.wait_state('lost')
+    assert 'from the WiFi scans' in m.latest_status()['reason']
+    for k, bad in enumerate(('1.5', 'n/a')):
+        answers.publish(place_answer(T0 + 90 + k, far, 3.5, coverage=bad))
+    assert wait_until(lambda: m.latest_status()['bad_scans'] == '2', 30,
+                      ros)
     ros.destroy_publisher(answers)
     assert m.verdicts == [False, True, False], m.verdicts
-    assert 'from the WiFi scans' in m.latest_status()['reason']
+    log = m.close()
+    m.close = lambda: None
+    assert "scan refused (1 so far): coverage '1.5' is not a " \
+        'probability' in log, log
 
 
 def test_bad_localiser_messages_are_counted_named_and_left_out(

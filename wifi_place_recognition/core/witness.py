@@ -17,8 +17,9 @@ evidence:
   ``max_fused_sd`` (a filter that just started, or one whose recent scans
   lie metres aside of it: :mod:`.filter.pose_spread`) is no evidence
   either way: it could not tell the localiser a few metres off,
-  nor is one while most recent scans do not testify: a scan unlike every
-  surveyed one says the robot is off the survey, where the scans snap
+  nor is one while most recent scans do not testify (a scan unlike every
+  surveyed one that the coverage probability does not call covered says
+  the robot is off the survey), where the scans snap
   to the nearest surveyed place and may drag the filter with them;
 - the scans: the same with the scan's own sigma and ``scan_floor_sd``, and
   only a scan that testifies (:func:`.witness_testimony.scan_doubt`: its
@@ -168,7 +169,10 @@ class Witness:
         if no judgement is due, or the scan is not valid
         (:func:`.witness_inputs.scan_is_valid`).
         """
-        coverage = math.nan if coverage is None else float(coverage)
+        try:
+            coverage = math.nan if coverage is None else float(coverage)
+        except (TypeError, ValueError):
+            return None
         if not scan_is_valid(stamp, xy, sigma, coverage):
             return None
         doubt = scan_doubt(sigma, coverage, self.params)

@@ -12,9 +12,9 @@ class WitnessParams:
     The defaults of the thresholds the benchmark chooses (agree_sigmas,
     alarm, floor_sd, max_scan_sigma, yaw_floor_sd, sure_sd, sure_yaw_sd)
     are those it chose on the robot runs of building b24, which gave no
-    false alarm on b14's (``benchmarks/witness.py``); since the fused
-    pose's covariance comes from its scans' offsets, b24 chooses
-    max_scan_sigma 4 m, level with 3 m on b14, and the default stays 3 m.
+    false alarm on b14's (``benchmarks/witness.py``; max_scan_sigma 4 m
+    from round 13 to 19, level with 3 m on b14, and the default stayed 3
+    m; since the scans' coverage probability joined, b24 chooses 3 m).
     """
 
     period: float = 1.0            # s between judgements (fused stamps)

@@ -1,10 +1,10 @@
 """
 What each witness testifies, and how far apart it says the localiser is.
 
-A scan testifies when :func:`scan_doubt` has nothing against it (its
-sigma up to ``max_scan_sigma``, or its coverage probability says it was
-taken on the survey: a scan unlike every surveyed one, the k-NN's sigma
-grows with that, snaps to the nearest surveyed place) and the survey
+A scan testifies when :func:`scan_doubt` has nothing against it (a scan
+unlike every surveyed one, whose k-NN sigma grows with that, snaps to the
+nearest surveyed place: its sigma must be up to ``max_scan_sigma``, or
+its coverage probability say it was taken on the survey) and the survey
 covers the localiser's position (:func:`covered`). The
 distances are Mahalanobis distances under the sum of both covariances,
 plus floors for what neither knows and the distance the robot moved since
@@ -30,7 +30,8 @@ def scan_doubt(sigma, coverage, params):
     with that), unless its coverage probability (NaN: the model has no
     coverage model) says it was taken on the survey
     (:func:`.coverage.uncovered`). The probability alone silences no
-    scan: it calls right scans at a hole's edge off the survey.
+    scan: on another day it calls right scans on covered ground off the
+    survey.
     """
     if sigma <= params.max_scan_sigma:
         return ''

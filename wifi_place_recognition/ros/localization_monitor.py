@@ -67,6 +67,19 @@ STATES = {WAITING: (DiagnosticStatus.WARN, 'no localiser pose yet'),
           LOST: (DiagnosticStatus.ERROR, 'localiser lost')}
 
 
+def coverage_of(values):
+    """
+    Return a ~/place answer's coverage probability, or None if it is bad.
+
+    NaN when it has none (a model without a coverage model).
+    """
+    try:
+        value = float(values.get('coverage', 'nan'))
+    except ValueError:
+        return None
+    return value if math.isnan(value) or 0 <= value <= 1 else None
+
+
 def frame_pattern(template):
     """Return a regex matching the frames ``template`` makes."""
     parts = re.split(r'(\{building\}|\{floor\})', template)
@@ -110,7 +123,7 @@ class LocalizationMonitor(Node):
         self.model = load_model(self.model_path)
         self.witness = Witness(params, survey_of(self.model, self.frame_id))
         self.counts = Counter(localizer_poses=0, fused_poses=0, scans=0,
-                              seeds_sent=0, bad_fused=0)
+                              seeds_sent=0, bad_fused=0, bad_scans=0)
         self.last_fused = None       # the newest fused message
         self._logged = {}            # bad-input reason -> when logged
         self.status_pub = self.create_publisher(String, '~/status', LATCHED)
@@ -253,17 +266,28 @@ class LocalizationMonitor(Node):
                 # (a node before round 9 sends only scan_sigma_m, the same)
                 sigma = float(values.get('scan_knn_sigma_m',
                                          values['scan_sigma_m']))
-                # NaN: the model has no coverage model
-                coverage = float(values.get('coverage', 'nan'))
                 frame = self.frame_id.format(
                     building=int(values['building']),
                     floor=int(values['floor']))
             except (KeyError, ValueError):
                 continue        # a rejected scan, or no position
+            coverage = coverage_of(values)
+            if coverage is None:
+                self._refuse_scan(values['coverage'])
+                continue
             self.counts['scans'] += 1
             if self.witness.scan(seconds(msg.header.stamp), frame, xy,
                                  sigma, coverage) is not None:
                 self._update()
+
+    def _refuse_scan(self, coverage):
+        self.counts['bad_scans'] += 1
+        now = time.monotonic()          # throttled, as the poses' reasons
+        if now - self._logged.get('bad_scans', -math.inf) >= THROTTLE_S:
+            self._logged['bad_scans'] = now
+            self.get_logger().warn(
+                f'scan refused ({self.counts["bad_scans"]} so far): '
+                f'coverage {coverage!r} is not a probability (0-1 or nan)')
 
     # outputs --------------------------------------------------------------
     def _send_seed(self, msg, why):
@@ -326,7 +350,7 @@ class LocalizationMonitor(Node):
             _kv('model_path', self.model_path),
         ] + [_kv(k, self.counts.get(k, 0)) for k in
              ('localizer_poses', 'fused_poses', 'scans', 'seeds_sent',
-              'bad_fused')] + \
+              'bad_fused', 'bad_scans')] + \
             [_kv(f'bad_localizer/{r}', self.counts.get(f'bad_localizer/{r}',
                                                        0))
              for r in BAD_REASONS]

@@ -8,6 +8,7 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from std_msgs.msg import Bool, String
 
+from ..core.coverage import OFF_SURVEY_BELOW
 from ..core.witness_params import WitnessParams
 from . import node_interface
 from .node_interface import float_range
@@ -32,8 +33,8 @@ TOPICS = (
     ('subscribes', '{fused_topic}', PoseWithCovarianceStamped,
      'classifier_node\'s fused pose (fused_topic), the WiFi witness'),
     ('subscribes', '{place_topic}', DiagnosticArray,
-     'classifier_node\'s answers (place_topic): each scan\'s own position '
-     'and sigma'),
+     'classifier_node\'s answers (place_topic): each scan\'s own position, '
+     'sigma and coverage probability'),
     ('publishes', '~/status', String,
      'the state: agrees (WiFi compared and found no disagreement, the '
      'localiser is not lost), disagrees (evidence against the localiser '
@@ -98,9 +99,10 @@ PARAMETERS = (
     _positive('scan_floor_sd', 'the same for a scan\'s own position (m)',
               _D.scan_floor_sd, 100.0),
     _positive('max_scan_sigma', 'scans with a larger sigma (m) are off the '
-              'survey unless their coverage probability is 0.5 or more: no '
-              'evidence, nor is the fused pose while the recent scans are '
-              'so', _D.max_scan_sigma, 1000.0),
+              'survey unless their coverage probability is '
+              f'{OFF_SURVEY_BELOW:g} or more: no evidence, nor is the fused '
+              'pose while the recent scans are so', _D.max_scan_sigma,
+              1000.0),
     _positive('yaw_floor_deg', 'degrees added to both yaw deviations',
               round(math.degrees(_D.yaw_floor_sd), 6), 180.0),
     _positive('sure_sd', 'a fused pose this sure (m, largest standard '
