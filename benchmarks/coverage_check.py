@@ -36,7 +36,7 @@ from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.coverage import (COVERED_M,
                                                   distance_by_place,
                                                   uncovered)
-from wifi_place_recognition.core.evaluation import align, unknown_aps
+from wifi_place_recognition.core.evaluation import scan_answers
 from wifi_place_recognition.core.resources import default_model_path
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.training.coverage import (auc, logit,
@@ -70,8 +70,7 @@ def at_prior(p, report, floor=None):
 
 def check(model, train, test):
     """Return the coverage model's figures on ``test`` (dict)."""
-    _, _, _, p = model.predict_positions(
-        align(model, test), coverage=True, unknown=unknown_aps(model, test))
+    p = scan_answers(model, test)[3]
     place = np.column_stack([test.building, test.floor])
     covered = distance_by_place(
         test.position, place, train.position,

@@ -61,7 +61,7 @@ from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.coverage import (COVERED_M,
                                                   distance_to_survey)
 from wifi_place_recognition.core.atomic import atomic_write
-from wifi_place_recognition.core.evaluation import align, unknown_aps
+from wifi_place_recognition.core.evaluation import scan_answers
 from wifi_place_recognition.core.filter.fusion import Fusion
 from wifi_place_recognition.core.filter.odometry_fit import (FitError,
                                                              fit_odometry)
@@ -205,8 +205,7 @@ def models(train, folder, holes=False):
 
 def single_scans(model, run):
     """Return a model's single-scan (positions, sigmas, coverage) of a run."""
-    return model.predict_positions(align(model, run.fp), coverage=True,
-                                   unknown=unknown_aps(model, run.fp))[1:]
+    return scan_answers(model, run.fp)[1:]
 
 
 def detector_figures(coverage, hole, ok):

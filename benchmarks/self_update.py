@@ -65,7 +65,7 @@ from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.coverage import (COVERED_M,
                                                   distance_to_survey)
-from wifi_place_recognition.core.evaluation import align, unknown_aps
+from wifi_place_recognition.core.evaluation import align, scan_answers
 from wifi_place_recognition.core.filter.trajectory import (fuse_offline,
                                                            score, truth_at)
 from wifi_place_recognition.core.filter.fusion import Fusion
@@ -137,9 +137,7 @@ def working_streams(model, run):
     The scans' k-NN sigma, as the monitor reads it (not widened), and
     their coverage probability (the APs the model lacks counted).
     """
-    proba, xy, sigma, coverage = model.predict_positions(
-        align(model, run.fp), coverage=True, widened=False,
-        unknown=unknown_aps(model, run.fp))
+    proba, xy, sigma, coverage = scan_answers(model, run.fp, widened=False)
     scans = (run.stamps, xy, sigma, coverage)
     fxy, fyaw, fcov = fuse_offline(run.odometry, scans,
                                    Fusion(model.fusion, seed=0))

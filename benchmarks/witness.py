@@ -64,7 +64,7 @@ import sys
 import numpy as np
 from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
-from wifi_place_recognition.core.evaluation import align, unknown_aps
+from wifi_place_recognition.core.evaluation import scan_answers
 from wifi_place_recognition.core.filter.angles import wrap
 from wifi_place_recognition.core.filter.fusion import (compose, Fusion,
                                                        relative)
@@ -170,9 +170,7 @@ def scan_stream(model, run):
     coverage probability (NaN without a coverage model), the APs the
     model lacks counted as the node counts them.
     """
-    _, xy, sigma, coverage = model.predict_positions(
-        align(model, run.fp), coverage=True, widened=False,
-        unknown=unknown_aps(model, run.fp))
+    _, xy, sigma, coverage = scan_answers(model, run.fp, widened=False)
     return run.stamps, xy, sigma, coverage
 
 

@@ -34,6 +34,19 @@ def unknown_aps(onto, fp):
     return np.isfinite(fp.rssi[:, lacking]).sum(axis=1)
 
 
+def scan_answers(model, fp, widened=True):
+    """
+    Return (probabilities, xy, sigma, coverage) of each scan, as the node.
+
+    :meth:`.model.PlaceModel.predict_positions` of the rows :func:`align`
+    maps, the APs the model lacks counted (:func:`unknown_aps`); with
+    ``widened`` false the k-NN's sigma, not the 95 % circle's.
+    """
+    return model.predict_positions(align(model, fp), coverage=True,
+                                   widened=widened,
+                                   unknown=unknown_aps(model, fp))
+
+
 def evaluate(model, fp):
     """
     Return accuracies, predictions and the confusion matrix.

@@ -64,7 +64,7 @@ def pose_problem(stamp, xy, yaw, cov):
     return None
 
 
-def scan_is_valid(stamp, xy, sigma, coverage=math.nan):
+def scan_is_valid(stamp, xy, sigma, coverage):
     """
     Return True if a scan's stamp, x, y and sigma (m, >= 0) are finite.
 
