@@ -325,9 +325,11 @@ class ClassifierNode(Node):
                 _kv('scan_x', f'{place.scan_position[0]:.3f}'),
                 _kv('scan_y', f'{place.scan_position[1]:.3f}'),
                 _kv('scan_sigma_m', f'{place.scan_sigma:.3f}'),
-                _kv('scan_knn_sigma_m', f'{place.scan_knn_sigma:.3f}'),
+                # what localization_monitor decides on: exact, so that a
+                # value just past its threshold is not rounded onto it
+                _kv('scan_knn_sigma_m', repr(float(place.scan_knn_sigma))),
                 _kv('coverage', 'nan' if place.coverage is None else
-                    f'{place.coverage:.3f}')]
+                    repr(float(place.coverage)))]
 
     def _frame(self, place):
         """Return the frame of ``place`` (building, floor)."""
