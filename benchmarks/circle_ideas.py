@@ -25,14 +25,24 @@ them passed again: few of their scans lie off the survey):
   prior (the regression's intercept) moved from the cut scans' share
   covered to the share among the model's own held-out scans (its
   coverage report): the share another pass over the survey meets.
+- **loud k dB, m m/dB**: the circle widened to hypot(sigma, m max(0, x -
+  k)), x the scan's loudness excess: the most by which it hears an AP
+  louder than the survey's loudest reading of it (APs the survey never
+  heard left out: the node counts those as unknown). Near an AP that no
+  survey place was near, a scan hears it louder than the survey ever did.
 
 Per pair: the share of the test scans inside their circle (all, in holes,
 covered), the cut model's ROC AUC against the scans in holes beside the
 model's own, and e; of the scans in holes, the median one-sidedness and
-P(covered) of those the default circle misses and holds. Table on stdout, JSON in
+P(covered) of those the default circle misses and holds. With
+``--panel``, also the default and the loudness widenings on each panel
+dataset's test file (another day; the model trained by ``train_model
+--seed 0``, UJIIndoorLoc the shipped model), where a widening must not
+push a circle past 0.98. Table on stdout, JSON in
 ``benchmarks/results/circle-ideas.json``.
 
     python benchmarks/circle_ideas.py [--data ../shared/datasets/robot]
+                                      [--panel]
 """
 
 import argparse
@@ -62,9 +72,35 @@ import fusion as fb  # noqa: E402  (the fusion benchmark's protocol)
 CUT_RADIUS_M, CUT_SHARE, CUTTINGS, POWER = (4.0, 8.0), 1 / 3, 4, 3
 
 
+#: Loudness widenings: (margin dB, metres per dB beyond it).
+LOUD = ((3.0, 1.0), (5.0, 1.0), (5.0, 2.0))
+
 #: The ideas, in the table's order.
 ALL = ('default', 'edge from cut places', 'coverage widening',
-       'coverage widening, prior held out')
+       'coverage widening, prior held out',
+       *(f'loud {k:g} dB, {m:g} m/dB' for k, m in LOUD))
+
+
+def loudness_excess(survey_rssi, rssi):
+    """
+    Return each scan's loudness excess (dB; -inf: no AP the survey heard).
+
+    The most by which it hears an AP louder than the survey's loudest
+    reading of that AP; both aligned to the model's columns (NaN: not
+    heard).
+    """
+    heard = ~np.isnan(survey_rssi)
+    loudest = np.where(heard.any(axis=0), np.nanmax(
+        np.where(heard, survey_rssi, -np.inf), axis=0), np.nan)
+    excess = rssi - loudest
+    return np.max(np.where(np.isnan(excess), -np.inf, excess), axis=1)
+
+
+def loud_circles(circle, excess):
+    """Return {idea: sigma} of the loudness widenings."""
+    return {f'loud {k:g} dB, {m:g} m/dB':
+            np.hypot(circle, m * np.maximum(0.0, excess - k))
+            for k, m in LOUD}
 
 
 def cut_places(xy, y, rng):
@@ -118,6 +154,8 @@ def cut_examples(model, survey_csv, seed=0):
 def pair(model, survey_csv, test, kept):
     """Return the circle figures of one test run with one survey's model."""
     rssi = align(model, test.fp)
+    excess = loudness_excess(align(model, read_fingerprints(survey_csv)),
+                             rssi)
     proba, xy, circle, p = model.predict_positions(rssi, coverage=True)
     knn = model.predict_positions(rssi, widened=False)[2]
     side = np.array([model.position.one_sidedness(a, c)
@@ -167,6 +205,12 @@ def pair(model, survey_csv, test, kept):
         if rows.any() and np.isfinite(v[rows]).any() else None
         for what, rows in (('missed', miss), ('inside', hit))
         for key, v in (('one_sidedness', side), ('p_covered', p))}
+    sigmas.update(loud_circles(circle, excess))
+    out['loudness_excess_db'] = {   # medians, scans with an AP heard
+        where: float(np.median(excess[rows & np.isfinite(excess)]))
+        if (rows & np.isfinite(excess)).any() else None
+        for where, rows in (('in_holes', ok & hole),
+                            ('covered', ok & ~hole))}
     out['in_95_circle'] = {}
     for name, sigma in sigmas.items():
         inside = error <= R95 * sigma
@@ -188,6 +232,30 @@ def test_features(model, rssi, classes):
                                  c)
         out.append(features(pos, distance, c, unheard_share(pos, cols, c)))
     return np.array(out)
+
+
+def panel(root, folder):
+    """Return the default and loudness circles on each panel dataset."""
+    from coverage_check import _data, _model
+    from datasets import PANEL
+    out = {}
+    for name in PANEL + ('ujiindoorloc', 'wifine'):
+        files, train, test = _data(root, name, False, folder)
+        model, basis = _model(name, files, folder)
+        rssi = align(model, test)
+        _, xy, circle = model.predict_positions(rssi)
+        error = np.linalg.norm(xy - test.position, axis=1)
+        ok = np.isfinite(error)
+        sigmas = {'default': circle, **loud_circles(
+            circle, loudness_excess(align(model, train), rssi))}
+        out[name] = {'model': basis, 'scans': int(ok.sum()),
+                     'in_95_circle': {
+                         k: float((error <= R95 * v)[ok].mean())
+                         for k, v in sigmas.items()}}
+        print(f'{name:14s} ' + ' '.join(
+            f'{v:.3f}' for v in out[name]['in_95_circle'].values()),
+            flush=True)
+    return out
 
 
 def summary(results):
@@ -222,6 +290,10 @@ def main():
     p.add_argument('--data', type=Path, default=fb.DEFAULT_DATA)
     p.add_argument('--out', type=Path,
                    default=fb.RESULTS / 'circle-ideas.json')
+    p.add_argument('--panel', action='store_true',
+                   help='also score the loudness widenings on the panel')
+    p.add_argument('--datasets-root', type=Path,
+                   default=fb.ROOT.parent / 'shared' / 'datasets')
     args = p.parse_args()
     results, names = {}, None
     with tempfile.TemporaryDirectory() as folder:
@@ -257,6 +329,11 @@ def main():
                                   for n in names), flush=True)
     out = {'protocol': __doc__.split('\n\n')[1].replace('\n', ' '),
            'pairs': results, 'summary': summary(results)}
+    if args.panel:
+        print('panel: in the circle: ' + ', '.join(
+            ['default', *loud_circles(np.zeros(1), np.zeros(1))]))
+        with tempfile.TemporaryDirectory() as folder:
+            out['panel'] = panel(args.datasets_root, folder)
     for name, figures in out['summary'].items():
         print(f'{name}: ' + '; '.join(
             f'{b} {v["min"]:.3f}-{v["max"]:.3f}, within 0.90-0.98 '
