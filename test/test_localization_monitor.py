@@ -8,8 +8,9 @@ monitor runs in its own process (the shipped model's survey). The robot
 drives along x at 0.5 m/s; the fused pose is the truth with 0.5 m and 3
 degrees of spread (a kidnap: the scans' own positions on ``~/place``
 instead). Checked: the latched ``~/status`` and ``~/localization_ok``,
-the status on ``/diagnostics``, ``initialpose``, the log, and parameters
-refused in the parameters' own terms.
+the status on ``/diagnostics``, ``initialpose`` (none from a fused pose
+built on scans off the survey), the log, and parameters refused in the
+parameters' own terms.
 """
 
 import math
@@ -281,6 +282,39 @@ def test_with_no_localiser_pose_the_sure_fused_pose_seeds_it(monitor, ros):
     assert math.hypot(p.x - x, p.y - y) < 2
     assert len(m.initial) == 1          # holdoff: once
     assert m.verdicts == [False]
+
+
+def test_no_seed_from_a_fused_pose_built_on_scans_off_the_survey(
+        monitor, ros):
+    # issue 35: no localiser pose yet, the fused pose sure, but the scans
+    # unlike any surveyed one: nothing sent until most of them testify
+    here = survey_of(load_model(default_model_path()), 'map')['map'][0]
+    m = monitor('off_survey_seed_monitor', '-p',
+                'initial_pose_on_lost:=true')
+    answers = ros.create_publisher(DiagnosticArray, 'classifier_node/place',
+                                   RELIABLE)
+    assert wait_until(lambda: answers.get_subscription_count(), 30, ros)
+    for k in range(5):              # the scans first: off the survey
+        answers.publish(place_answer(T0 + k, here, 5.0))
+        m.spin()
+    assert wait_until(lambda: m.status and int(m.status[-1]['scans']) == 5,
+                      10, ros), m.status[-1:]
+    for k in range(5, 15):
+        answers.publish(place_answer(T0 + k, here, 5.0))
+        m.spin()
+        m.fused.publish(pose(T0 + k, *here, 0.0, sd=0.5, yaw_sd=0.05))
+        m.spin()
+    m.spin(0.3)
+    assert not m.initial
+    for k in range(15, 25):         # like the surveyed ones again
+        answers.publish(place_answer(T0 + k, here, 1.5))
+        m.spin()
+        m.fused.publish(pose(T0 + k, *here, 0.0, sd=0.5, yaw_sd=0.05))
+        m.spin()
+    ros.destroy_publisher(answers)
+    assert wait_until(lambda: m.initial, 5, ros), 'no initial pose'
+    assert m.initial[0].header.stamp.sec >= T0 + 16, m.initial[0].header
+    assert len(m.initial) == 1
 
 
 def place_answer(t, xy, sigma, knn_sigma=None, coverage=None):

@@ -209,6 +209,49 @@ def test_seeds_at_start_up_once_sure_and_when_lost_once_per_holdoff():
     assert found == math.ceil(p.alarm / p.agree_sigmas) - 1, found
 
 
+def test_no_seed_from_a_fused_pose_built_on_scans_off_the_survey():
+    survey = {'map': np.column_stack([np.arange(0, 100, 0.5),
+                                      np.zeros(200)])}
+    p = WitnessParams(holdoff=1000.0)
+    wide = p.max_scan_sigma + 2
+
+    def step(w, k, sigma, fused_sd, local_dx=None):
+        xy, yaw = truth(k)
+        if local_dx is not None:
+            w.localiser(k, 'map', xy + [local_dx, 0], yaw, cov(0.1))
+        w.scan(k, 'map', xy, sigma)
+        j = w.fused(k, 'map', xy, yaw, cov(fused_sd))
+        if j is not None and j.seed:
+            w.seeded(j.stamp)
+        return j
+
+    # start-up: a sure fused pose seeds only once most scans testify
+    w = Witness(p, survey)
+    judged = [step(w, k, wide, 0.5) for k in range(20)]
+    assert not any(j.seed for j in judged)
+    judged = [step(w, k, 1.5, 0.5) for k in range(20, 30)]
+    seeds = [j for j in judged if j.seed]
+    assert [j.stamp for j in seeds] == [22]     # 3 of the last 5 testify
+    assert seeds[0].seed.startswith('start-up')
+    # lost (found by the scans while the fused pose was too wide), then
+    # the scans leave the survey and the fused pose becomes sure: no seed
+    # until the scans testify again
+    w = Witness(p, survey)
+    for k in range(10):
+        step(w, k, 1.5, 3.0, local_dx=0.0)
+    for k in range(10, 50):
+        step(w, k, 1.5, 3.0, local_dx=20.0)
+    assert w.ok is False
+    for k in range(50, 55):
+        step(w, k, wide, 3.0, local_dx=20.0)
+    judged = [step(w, k, wide, 0.5, local_dx=20.0) for k in range(55, 70)]
+    assert not any(j.seed for j in judged) and w.ok is False
+    judged = [step(w, k, 1.5, 0.5, local_dx=20.0) for k in range(70, 80)]
+    seeds = [j for j in judged if j.seed]
+    assert [j.stamp for j in seeds] == [72]
+    assert seeds[0].seed.startswith('lost')
+
+
 def test_a_seed_not_sent_leaves_a_lost_localiser_lost():
     # initial_pose_on_lost off: the seeds proposed are not sent, so
     # nothing starts the localiser over and the verdict stays lost

@@ -49,11 +49,12 @@ fused pose or scan yet, the fused pose too wide, the scans off the survey,
 the localiser silent) and :data:`LOST`; :attr:`Witness.why` says why.
 
 A pose to seed the localiser with (:attr:`Judgement.seed`,
-:mod:`.witness_seeding`) is the fused pose when it is sure: at start-up,
-while no localiser message has been heard, and when the localiser is
-lost. The caller says when it sent one (:meth:`Witness.seeded`): the
-evidence is cleared (the localiser starts over) and no other is proposed
-for ``holdoff`` seconds.
+:mod:`.witness_seeding`) is the fused pose when it is sure and on the
+survey (not while most recent scans do not testify): at start-up, while
+no localiser message has been heard, and when the localiser is lost. The
+caller says when it sent one (:meth:`Witness.seeded`): the evidence is
+cleared (the localiser starts over) and no other is proposed for
+``holdoff`` seconds.
 
 Bad localiser poses (:func:`.witness_inputs.pose_problem`: not finite,
 covariance not positive definite; :mod:`.witness_pairing`: stamps going
@@ -156,8 +157,9 @@ class Witness:
             return None
         judgement = self._judge_fused(pose)
         judgement.fused = pose
-        judgement.seed = self.seeding.propose(pose, self.streams.heard,
-                                              judgement, self.params)
+        if not self._off_survey():
+            judgement.seed = self.seeding.propose(
+                pose, self.streams.heard, judgement, self.params)
         self.last = judgement
         return judgement
 
@@ -247,6 +249,19 @@ class Witness:
         return max(self.local.stamp if self.local else -math.inf,
                    self.last.stamp if self.last else -math.inf)
 
+    def _off_survey(self):
+        """
+        Return why the fused pose is no evidence nor seed, or ''.
+
+        While most of the recent scans do not testify (off the survey),
+        the fused pose is built on them.
+        """
+        doubted = self.recent.count(False)
+        if doubted > len(self.recent) / 2:
+            return (f'off the survey ({doubted} of the last '
+                    f'{len(self.recent)} scans do not testify)')
+        return ''
+
     def _recent_testimony(self):
         now = self._now()
         return any(t is not None and now - self.params.max_age <= t[0] <= now
@@ -286,11 +301,9 @@ class Witness:
         if pose.sd > p.max_fused_sd:
             return self._judgement(pose.stamp, f'fused pose too wide '
                                    f'({pose.sd:.1f} m)')
-        doubted = self.recent.count(False)
-        if doubted > len(self.recent) / 2:
-            return self._judgement(pose.stamp, f'off the survey ({doubted} '
-                                   f'of the last {len(self.recent)} scans '
-                                   f'do not testify)')
+        off = self._off_survey()
+        if off:
+            return self._judgement(pose.stamp, off)
         d2, distance, yaw_deg = fused_distance(local, pose, moved, p)
         return self._compared('fused', pose.stamp, d2, distance, yaw_deg)
 

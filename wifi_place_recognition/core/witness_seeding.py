@@ -4,7 +4,8 @@ When the witness proposes a pose to seed the localiser with (ROS-free).
 The fused pose, when it is sure (position standard deviation at most
 ``sure_sd``, yaw's at most ``sure_yaw_sd``): at start-up, while no
 localiser message has been heard, and when the localiser is lost; at most
-one per ``holdoff`` seconds after one was sent.
+one per ``holdoff`` seconds after one was sent. The witness asks only
+while the fused pose is on the survey (:mod:`.witness`).
 """
 
 import math
