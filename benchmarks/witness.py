@@ -467,7 +467,7 @@ def row(name, f):
     for key in SURVEYS:
         b = s['by_survey'][key]
         lines.append(
-            f'{name:10s} {key:5s} {f["false_alarms"][key]["per_hour"]:6.1f} '
+            f'{name:10s} {key:6s} {f["false_alarms"][key]["per_hour"]:6.1f} '
             f'{b["delay_median_s"]:6.0f} {b["delay_max_s"]:6.0f} '
             f'{b["missed"]:3d}/{b["episodes"]:<3d} '
             f'{b["inside_flagged"]:2d}/{f["inside"]:<2d} '
@@ -505,7 +505,7 @@ def main():
                 print(f'{site}/{r.name}: cases ready', flush=True)
     results = {'protocol': __doc__.strip(), 'seeds': SEEDS,
                'targets': TARGETS, 'buildings': {}}
-    print(f'{"run":10s} {"survey":5s} {"FA/h":>6s} {"med s":>6s} '
+    print(f'{"run":10s} {"survey":6s} {"FA/h":>6s} {"med s":>6s} '
           f'{"max s":>6s} {"miss":>7s} {"in":>5s} {"reseed":>6s} {"(n)":5s} '
           f'{"start":>6s} {"m":>5s} {"deg":>5s}')
     for site, tune in ((s, [t for t in cases if t != s]) for s in cases):

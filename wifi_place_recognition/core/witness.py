@@ -77,7 +77,8 @@ from .witness_seeding import Seeding
 from .witness_testimony import (covered, fused_distance, scan_distance,
                                 scan_doubt)
 
-#: Recent scans: while most of them do not testify, nor does the fused pose.
+#: Recent scans: while most of them do not testify, the fused pose neither
+#: testifies nor seeds.
 RECENT_SCANS = 5
 #: The states of :attr:`Witness.state`.
 WAITING, AGREES, DISAGREES, CANNOT_TELL, LOST = (

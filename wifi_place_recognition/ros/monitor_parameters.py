@@ -88,8 +88,8 @@ PARAMETERS = (
     ('initial_pose_on_lost', False, ParameterDescriptor(
         description='send the fused pose on initialpose at start-up (no '
                     'localiser pose yet) and when the localiser is lost, '
-                    'once the fused pose is sure (sure_sd, sure_yaw_deg) '
-                    'and most of the last 5 scans testify')),
+                    'once the fused pose is sure (sure_sd, sure_yaw_deg), '
+                    'not while most of the last 5 scans do not testify')),
     _positive('agree_sigmas', 'a judgement this many standard deviations '
               'apart adds no evidence; farther adds, nearer takes away',
               _D.agree_sigmas, 100.0),
