@@ -5,7 +5,8 @@ Synthetic streams: the robot drives along x at 0.5 m/s, a fused pose and a
 localiser pose every second. Checked: agreement, one bad scan, a
 sustained disagreement, the yaw only when the fused yaw is known, another
 floor's frame, the survey's coverage, a silent localiser, seeds at
-start-up and when lost, bad input refused with a reason, and the state:
+start-up and when lost (none from a fused pose built on scans off the
+survey), bad input refused with a reason, and the state:
 agrees only when WiFi compared, cannot tell when nothing was.
 """
 
