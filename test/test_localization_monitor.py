@@ -288,12 +288,9 @@ def test_no_seed_from_a_fused_pose_built_on_scans_off_the_survey(
         monitor, ros):
     # issue 35: no localiser pose yet, the fused pose sure, but the scans
     # unlike any surveyed one: nothing sent until most of them testify
-    here = survey_of(load_model(default_model_path()), 'map')['map'][0]
-    m = monitor('off_survey_seed_monitor', '-p',
-                'initial_pose_on_lost:=true')
-    answers = ros.create_publisher(DiagnosticArray, 'classifier_node/place',
-                                   RELIABLE)
-    assert wait_until(lambda: answers.get_subscription_count(), 30, ros)
+    here, m, answers = surveyed_monitor(monitor, ros,
+                                        'off_survey_seed_monitor', '-p',
+                                        'initial_pose_on_lost:=true')
     for k in range(5):              # the scans first: off the survey
         answers.publish(place_answer(T0 + k, here, 5.0))
         m.spin()
@@ -452,10 +449,10 @@ def test_with_nothing_to_compare_wifi_cannot_tell_at_once(monitor, ros):
     assert 'localiser agrees with WiFi' in log, log
 
 
-def surveyed_monitor(monitor, ros, name):
+def surveyed_monitor(monitor, ros, name, *params):
     """Return a surveyed spot, a monitor and a ~/place publisher to it."""
     here = survey_of(load_model(default_model_path()), 'map')['map'][0]
-    m = monitor(name)
+    m = monitor(name, *params)
     answers = ros.create_publisher(DiagnosticArray, 'classifier_node/place',
                                    RELIABLE)
     assert wait_until(lambda: answers.get_subscription_count(), 30, ros)

@@ -64,12 +64,17 @@ def pose_problem(stamp, xy, yaw, cov):
     return None
 
 
+def coverage_is_valid(coverage):
+    """Return True if a scan's coverage probability is in 0-1 or NaN (none)."""
+    return math.isnan(coverage) or 0 <= coverage <= 1
+
+
 def scan_is_valid(stamp, xy, sigma, coverage):
     """
     Return True if a scan's stamp, x, y and sigma (m, >= 0) are finite.
 
-    Its coverage probability too must lie in 0-1, or be NaN (none).
+    Its coverage probability too must be valid (:func:`coverage_is_valid`).
     """
     values = [stamp, *np.ravel(xy), sigma]
     return len(values) == 4 and all(map(math.isfinite, values)) and \
-        sigma >= 0 and (math.isnan(coverage) or 0 <= coverage <= 1)
+        sigma >= 0 and coverage_is_valid(coverage)

@@ -47,6 +47,7 @@ from ..core.artifact import load_model, ModelFileError
 from ..core.resources import default_model_path
 from ..core.witness import (AGREES, CANNOT_TELL, DISAGREES, LOST, WAITING,
                             Witness)
+from ..core.witness_inputs import coverage_is_valid
 from .classifier_parameters import check_frame
 from .messages import key_value as _kv, pose_problem, seconds, yaw_of
 from .monitor_parameters import declare, WITNESS_FIELDS, witness_params
@@ -77,7 +78,7 @@ def coverage_of(values):
         value = float(values.get('coverage', 'nan'))
     except ValueError:
         return None
-    return value if math.isnan(value) or 0 <= value <= 1 else None
+    return value if coverage_is_valid(value) else None
 
 
 def frame_pattern(template):
