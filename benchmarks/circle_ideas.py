@@ -27,9 +27,19 @@ them passed again: few of their scans lie off the survey):
   coverage report): the share another pass over the survey meets.
 - **loud k dB, m m/dB**: the circle widened to hypot(sigma, m max(0, x -
   k)), x the scan's loudness excess: the most by which it hears an AP
-  louder than the survey's loudest reading of it (APs the survey never
-  heard left out: the node counts those as unknown). Near an AP that no
-  survey place was near, a scan hears it louder than the survey ever did.
+  louder than the loudest reading of it among the references its class
+  searches (the locator keeps that reading: each AP row's int8 scale;
+  APs those references never heard left out: the node counts those as
+  unknown). Near an AP that no survey place was near, a scan hears it
+  louder than the survey ever did. A grid of k and m; one is chosen on
+  each building (the most circles within 0.90-0.98, then the least
+  distance outside it, then the least from 0.95) and reported on the
+  other (leave-one-building-out).
+- **loud k dB, calibrated**: m learned per survey, as ``train_model``
+  learns the edge widening: the survey's own folds (its default grouped
+  folds), each held-out scan placed among the kept ones (the true class
+  searched), m the least that puts 95 % of the held-out scans louder
+  than the kept ones by more than k inside (none with fewer than 10).
 
 Per pair: the share of the test scans inside their circle (all, in holes,
 covered), the cut model's ROC AUC against the scans in holes beside the
@@ -59,10 +69,13 @@ from wifi_place_recognition.core.coverage import (
     COVERED_M, distance_by_place, features, unheard_share)
 from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.locator import (
-    calibrated_edge_sigma, EDGE_POWER, least_widening, Locator, R95)
+    calibrated_edge_sigma, EDGE_POWER, least_widening, LEVELS, Locator,
+    R95)
 from wifi_place_recognition.core.preprocessing import signal
 from wifi_place_recognition.data.fingerprints import read_fingerprints
+from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.coverage import auc, logit
+from wifi_place_recognition.training.folds import grouped_folds
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fusion as fb  # noqa: E402  (the fusion benchmark's protocol)
@@ -72,35 +85,108 @@ import fusion as fb  # noqa: E402  (the fusion benchmark's protocol)
 CUT_RADIUS_M, CUT_SHARE, CUTTINGS, POWER = (4.0, 8.0), 1 / 3, 4, 3
 
 
-#: Loudness widenings: (margin dB, metres per dB beyond it).
-LOUD = ((3.0, 1.0), (5.0, 1.0), (5.0, 2.0))
+#: Loudness widenings: (margin dB, metres per dB beyond it), and the
+#: margin of the one calibrated per survey.
+LOUD = tuple((k, m) for k in (0.0, 1.0, 2.0, 3.0, 5.0)
+             for m in (0.5, 1.0, 2.0, 4.0))
+CALIBRATED_K = 3.0
+LOUD_CALIBRATED = f'loud {CALIBRATED_K:g} dB, calibrated'
+#: The band a circle should hold, and where a choice aims within it.
+BAND, AIM = (0.90, 0.98), 0.95
 
-#: The ideas, in the table's order.
+#: The ideas, in the table's order (the loudness grid in its own table).
 ALL = ('default', 'edge from cut places', 'coverage widening',
-       'coverage widening, prior held out',
-       *(f'loud {k:g} dB, {m:g} m/dB' for k, m in LOUD))
+       'coverage widening, prior held out', LOUD_CALIBRATED)
 
 
-def loudness_excess(survey_rssi, rssi):
+def loud_name(k, m):
+    """Return the name of a loudness widening."""
+    return f'loud {k:g} dB, {m:g} m/dB'
+
+
+def dbm(value, representation, floor=-110.0):
+    """Return the dBm of a signal value (the inverse of ``signal``)."""
+    value = np.asarray(value, np.float64)
+    if representation == 'positive':
+        return floor + value
+    if representation == 'powed':
+        return floor - floor * value ** (1 / np.e)
+    return floor + 24 * np.log1p(value * np.expm1(-floor / 24))
+
+
+def excess(locator, columns, rssi, c):
     """
-    Return each scan's loudness excess (dB; -inf: no AP the survey heard).
+    Return how much louder than the survey a scan hears an AP (dB).
 
-    The most by which it hears an AP louder than the survey's loudest
-    reading of that AP; both aligned to the model's columns (NaN: not
-    heard).
+    The most by which it hears an AP (``columns``, ``rssi`` dBm) louder
+    than the loudest reading of it among the references class c
+    searches (LEVELS times the AP row's scale, in dBm); -inf when it
+    hears none the references heard.
     """
-    heard = ~np.isnan(survey_rssi)
-    loudest = np.where(heard.any(axis=0), np.nanmax(
-        np.where(heard, survey_rssi, -np.inf), axis=0), np.nan)
-    excess = rssi - loudest
-    return np.max(np.where(np.isnan(excess), -np.inf, excess), axis=1)
+    g = locator.group[c]
+    rows = locator.row_of[g, columns]
+    shared = rows >= 0
+    if not shared.any():
+        return -np.inf
+    loudest = dbm(locator.scale[locator.ap_start[g] + rows[shared]] *
+                  LEVELS, locator.representation)
+    return float(np.max(np.asarray(rssi, np.float64)[shared] - loudest))
 
 
-def loud_circles(circle, excess):
-    """Return {idea: sigma} of the loudness widenings."""
-    return {f'loud {k:g} dB, {m:g} m/dB':
-            np.hypot(circle, m * np.maximum(0.0, excess - k))
-            for k, m in LOUD}
+def excesses(locator, rssi, classes):
+    """Return the loudness excess of each scan (rows of model columns)."""
+    out = []
+    for row, c in zip(rssi, classes):
+        cols = np.flatnonzero(~np.isnan(row))
+        out.append(excess(locator, cols, row[cols], c))
+    return np.array(out)
+
+
+def loud_circles(circle, x, loud_m):
+    """Return {idea: sigma}: the grid's and the calibrated widening."""
+    out = {loud_name(k, m): np.hypot(circle, m * np.maximum(0.0, x - k))
+           for k, m in LOUD}
+    out[LOUD_CALIBRATED] = np.hypot(
+        circle, loud_m * np.maximum(0.0, x - CALIBRATED_K))
+    return out
+
+
+def calibrated_loud_m(model, fp):
+    """
+    Return (m, scans it learned from): the loudness widening of a survey.
+
+    ``fp`` the survey's scans, placed fold by fold among the kept ones
+    as the model places a scan (the true class searched): m the least
+    that puts 95 % of those louder than the kept references by more
+    than CALIBRATED_K within their circle (0 with fewer than 10).
+    """
+    pos, rssi = model.position, align(model, fp)
+    index = {tuple(int(v) for v in c): i for i, c in enumerate(model.classes)}
+    y = np.array([index[(int(b), int(f))]
+                  for b, f in zip(fp.building, fp.floor)])
+    config = TrainConfig()
+    error, sigma, x = [], [], []
+    for held in grouped_folds(fp, y, config.folds, config.grouping,
+                              config.seed).held_out:
+        keep = ~held
+        locator = Locator.build(
+            rssi[keep], y[keep], fp.position[keep], len(model.classes),
+            pos.neighbours, pos.sigma, pos.columns, pos.representation,
+            pos.metric, pos.group, pos.edge_sigma)
+        for row, c, truth in zip(rssi[held], y[held], fp.position[held]):
+            cols = np.flatnonzero(~np.isnan(row))
+            distance = locator.distances(
+                cols, signal(row[cols], pos.representation), c)
+            at, knn = locator.weighted(distance, pos.neighbours, c)
+            error.append(np.linalg.norm(at - truth))
+            sigma.append(locator.widened(at, knn, c))
+            x.append(excess(locator, cols, row[cols], c))
+    error, sigma, x = (np.array(v) for v in (error, sigma, x))
+    loud = np.isfinite(error) & (x > CALIBRATED_K)
+    if loud.sum() < 10:
+        return 0.0, int(loud.sum())
+    return least_widening(error[loud], sigma[loud],
+                          x[loud] - CALIBRATED_K), int(loud.sum())
 
 
 def cut_places(xy, y, rng):
@@ -154,9 +240,10 @@ def cut_examples(model, survey_csv, seed=0):
 def pair(model, survey_csv, test, kept):
     """Return the circle figures of one test run with one survey's model."""
     rssi = align(model, test.fp)
-    excess = loudness_excess(align(model, read_fingerprints(survey_csv)),
-                             rssi)
     proba, xy, circle, p = model.predict_positions(rssi, coverage=True)
+    loud = excesses(model.position, rssi, proba.argmax(axis=1))
+    loud_m, loud_scans = calibrated_loud_m(model,
+                                           read_fingerprints(survey_csv))
     knn = model.predict_positions(rssi, widened=False)[2]
     side = np.array([model.position.one_sidedness(a, c)
                      if np.isfinite(a).all() else np.nan
@@ -185,7 +272,9 @@ def pair(model, survey_csv, test, kept):
     out = {'hole_scans': int((hole & ok).sum()),
            'auc_model': auc(p[ok], ~hole[ok]) if (hole & ok).any() and
            np.isfinite(p[ok]).all() else None,
-           'auc_cut': None, 'edge_from_cut_places_m': edge, 'e_m': {}}
+           'auc_cut': None, 'edge_from_cut_places_m': edge, 'e_m': {},
+           'loud_calibrated_m_per_db': loud_m,
+           'loud_calibration_scans': loud_scans}
     for name, shift in shifts.items():
         def probability(rows):
             z = fit.decision_function((rows - mean) / scale) + shift
@@ -205,10 +294,10 @@ def pair(model, survey_csv, test, kept):
         if rows.any() and np.isfinite(v[rows]).any() else None
         for what, rows in (('missed', miss), ('inside', hit))
         for key, v in (('one_sidedness', side), ('p_covered', p))}
-    sigmas.update(loud_circles(circle, excess))
+    sigmas.update(loud_circles(circle, loud, loud_m))
     out['loudness_excess_db'] = {   # medians, scans with an AP heard
-        where: float(np.median(excess[rows & np.isfinite(excess)]))
-        if (rows & np.isfinite(excess)).any() else None
+        where: float(np.median(loud[rows & np.isfinite(loud)]))
+        if (rows & np.isfinite(loud)).any() else None
         for where, rows in (('in_holes', ok & hole),
                             ('covered', ok & ~hole))}
     out['in_95_circle'] = {}
@@ -234,8 +323,12 @@ def test_features(model, rssi, classes):
     return np.array(out)
 
 
-def panel(root, folder):
-    """Return the default and loudness circles on each panel dataset."""
+def panel(root, folder, shown):
+    """
+    Return the default and loudness circles on each panel dataset.
+
+    Every widening in the JSON; ``shown`` printed.
+    """
     from coverage_check import _data, _model
     from datasets import PANEL
     out = {}
@@ -243,17 +336,22 @@ def panel(root, folder):
         files, train, test = _data(root, name, False, folder)
         model, basis = _model(name, files, folder)
         rssi = align(model, test)
-        _, xy, circle = model.predict_positions(rssi)
+        proba, xy, circle = model.predict_positions(rssi)
         error = np.linalg.norm(xy - test.position, axis=1)
         ok = np.isfinite(error)
+        loud_m, loud_scans = calibrated_loud_m(model, train)
         sigmas = {'default': circle, **loud_circles(
-            circle, loudness_excess(align(model, train), rssi))}
+            circle, excesses(model.position, rssi, proba.argmax(axis=1)),
+            loud_m)}
         out[name] = {'model': basis, 'scans': int(ok.sum()),
+                     'loud_calibrated_m_per_db': loud_m,
+                     'loud_calibration_scans': loud_scans,
                      'in_95_circle': {
                          k: float((error <= R95 * v)[ok].mean())
                          for k, v in sigmas.items()}}
         print(f'{name:14s} ' + ' '.join(
-            f'{v:.3f}' for v in out[name]['in_95_circle'].values()),
+            f'{out[name]["in_95_circle"][n]:.3f}' for n in shown)
+            + f' (calibrated: {loud_m:.2f} m/dB from {loud_scans} scans)',
             flush=True)
     return out
 
@@ -279,9 +377,37 @@ def summary(results):
                 'within_0.90_0.98': int(((share >= 0.9) &
                                          (share <= 0.98)).sum()),
                 'runs': len(share),
-                'mean_distance_from_0.95': float(np.abs(share - 0.95)
-                                                 .mean())}
+                'mean_distance_from_0.95': float(np.abs(share - AIM)
+                                                 .mean()),
+                'distance_outside_band': float(np.sum(np.maximum(
+                    BAND[0] - share, 0) + np.maximum(share - BAND[1], 0)))}
     return out
+
+
+def loud_choice(figures):
+    """
+    Return {building: the loudness widening chosen on it} (or the default).
+
+    ``figures``: :func:`summary`'s. On each building: the most circles
+    within the band, then the least distance outside it, then the least
+    mean distance from AIM; the default wins a tie.
+    """
+    names = ['default', *(loud_name(k, m) for k, m in LOUD)]
+    return {b: min(names, key=lambda n: (
+        -figures[n][b]['within_0.90_0.98'],
+        round(figures[n][b]['distance_outside_band'], 9),
+        round(figures[n][b]['mean_distance_from_0.95'], 9)))
+        for b in figures['default']}
+
+
+def loud_table(results):
+    """Print every pair's circle under each loudness widening."""
+    print('in the circle, loud k dB, m m/dB: ' + ' '.join(
+        f'{k:g},{m:g}' for k, m in LOUD))
+    for name, f in results.items():
+        print(f'{name:28s} ' + ' '.join(
+            f'{f["in_95_circle"][loud_name(k, m)]["all"]:.3f}'
+            for k, m in LOUD), flush=True)
 
 
 def main():
@@ -314,8 +440,8 @@ def main():
                                 f'{"holes" if holes else "full"}')
                         f = results[name] = pair(model, scans, test, kept)
                         if names is None:
-                            names = list(f['in_95_circle'])
-                            names += [n for n in ALL if n not in names]
+                            names = [n for n in ALL
+                                     if n in f['in_95_circle']]
                             print(f'{"test <- survey":28s} hole AUC: '
                                   f'model  cut | in the circle: '
                                   + ', '.join(names))
@@ -327,18 +453,27 @@ def main():
                                   f'{f["in_95_circle"][n]["all"]:.3f}'
                                   if n in f['in_95_circle'] else '    -'
                                   for n in names), flush=True)
+    loud_table(results)
     out = {'protocol': __doc__.split('\n\n')[1].replace('\n', ' '),
            'pairs': results, 'summary': summary(results)}
+    out['loud_chosen_on'] = chosen = loud_choice(out['summary'])
+    shown = ['default', LOUD_CALIBRATED, *sorted(set(chosen.values()))]
     if args.panel:
-        print('panel: in the circle: ' + ', '.join(
-            ['default', *loud_circles(np.zeros(1), np.zeros(1))]))
+        print('panel: in the circle: ' + ', '.join(shown))
         with tempfile.TemporaryDirectory() as folder:
-            out['panel'] = panel(args.datasets_root, folder)
-    for name, figures in out['summary'].items():
+            out['panel'] = panel(args.datasets_root, folder, shown)
+    for name in ALL + tuple(n for n in shown if n not in ALL):
         print(f'{name}: ' + '; '.join(
             f'{b} {v["min"]:.3f}-{v["max"]:.3f}, within 0.90-0.98 '
             f'{v["within_0.90_0.98"]} of {v["runs"]}' for b, v in
-            figures.items()))
+            out['summary'][name].items()))
+    for b, name in chosen.items():
+        print(f'chosen on {b}: {name}; on the others: ' + '; '.join(
+            f'{o} within 0.90-0.98 {v["within_0.90_0.98"]} of {v["runs"]} '
+            f'(default {out["summary"]["default"][o]["within_0.90_0.98"]}),'
+            f' outside by {v["distance_outside_band"]:.3f} (default '
+            f'{out["summary"]["default"][o]["distance_outside_band"]:.3f})'
+            for o, v in out['summary'][name].items() if o != b))
     with atomic_write(args.out, 'w') as f:
         json.dump(out, f, indent=1)
     print(f'wrote {args.out}')
