@@ -22,7 +22,9 @@ protocol: ``benchmarks/fusion.py``'s survey_holes).
   odometry (with its drift) at AMCL's stamps; frozen (AMCL's stamps, the
   pose at the moment); kidnapped (the run spliced at the moment onto
   another run of its building at the same share, odometry continuous; the
-  localiser carries on by odometry, the WiFi sees the new place): the
+  localiser carries on by odometry, the WiFi sees the new place; the
+  scans, the fused pose and the surveyed positions all from the model
+  trained without the run spliced on, as the node has one model): the
   delay to the verdict "lost" (missed: none within 90 s), and the first
   re-seed after it, its error against the truth (within 2 m and 15 deg);
 - inside AMCL's own covariance: AMCL's poses moved by 2 standard
@@ -228,7 +230,7 @@ class Case:
         self.fused = {k: [fused_stream(m, self.scans[k], run.odometry, s)
                           for s in SEEDS] for k, m in models.items()}
         self.episodes = []      # (survey, kind, seed, t0, localiser,
-        #                           fused, scans, truth)
+        #                           fused, scans, truth, surveyed xy)
         self.inside = []        # (seed, t0, localiser)
         t = self.local[0]
         for seed in SEEDS:
@@ -260,7 +262,8 @@ class Case:
             for kind, local in lost:
                 self.episodes.append((key, kind, seed, t0, local,
                                       self.fused[key][seed],
-                                      self.scans[key], self.truth))
+                                      self.scans[key], self.truth,
+                                      self.survey[key]))
             self.episodes.append((key, 'kidnapped', seed, t0, *self._kidnap(
                 t0, cut_b, seed, partner, partner_models[key])))
 
@@ -278,7 +281,12 @@ class Case:
         return b.stamps[rng.choice(ok)]
 
     def _kidnap(self, t0, cut_b, seed, b, model):
-        """Return (localiser, fused, scans, truth): this run spliced onto b."""
+        """
+        Return (localiser, fused, scans, truth, surveyed xy): spliced onto b.
+
+        This run until t0, then b; every answer from ``model`` (trained
+        without b), whose surveyed positions the witness checks against.
+        """
         a = self.run
         shift = t0 - cut_b
         odometry = spliced_odometry(a.odometry, b.odometry, t0, cut_b)
@@ -301,7 +309,7 @@ class Case:
                  np.concatenate([self.local[3][keep], lb[3][later]]))
         tx, tyaw = truth_at(self.truth, [t0])
         local = carried(local, odometry, t0, tx[0], float(tyaw[0]))
-        return local, fused, scans, truth
+        return local, fused, scans, truth, survey(model)
 
     def _inside(self, rng, t0):
         """Return AMCL's poses moved by 2 sd of its covariance from t0 on."""
@@ -367,9 +375,10 @@ def evaluate(case, params):
             survey=case.survey[key]))) for f in streams]
         out['false_alarms'][key] = {'alarms': counts, 'per_hour': float(
             np.mean(counts) / hours)}
-    for key, kind, seed, t0, local, fused, scans, truth in case.episodes:
-        after = [j for j in judged(local, fused, scans, case.survey[key],
-                                   t0, params) if j.stamp >= t0]
+    for key, kind, seed, t0, local, fused, scans, truth, surveyed in \
+            case.episodes:
+        after = [j for j in judged(local, fused, scans, surveyed, t0,
+                                   params) if j.stamp >= t0]
         lost = [j.stamp for j in after if j.ok is False]
         seeds = [j for j in after if j.seed.startswith('lost')]
         e = {'survey': key, 'kind': kind, 'seed': seed,
