@@ -39,6 +39,9 @@ from node import Bench, RELIABLE, rss_mib
 ROOT = Path(__file__).resolve().parent.parent
 # The tests' helpers (not part of the package): fuzzed scans, hostile files.
 sys.path.insert(0, str(ROOT / 'test'))
+#: The environment of a child process that imports them too.
+HELPERS_ENV = dict(os.environ, PYTHONPATH=os.pathsep.join(
+    p for p in (str(ROOT / 'test'), os.environ.get('PYTHONPATH')) if p))
 from fuzz import fuzz_scans, hostile_model_files  # noqa: E402
 
 NODE = [sys.executable, '-m', 'wifi_place_recognition.ros.classifier_node']
@@ -167,7 +170,8 @@ def torn_writes(folder, kills, seed):
             'rewrite_forever; rewrite_forever(sys.argv[1])')
     for _ in range(kills):
         proc = subprocess.Popen([sys.executable, '-c', code, str(path)],
-                                stdout=subprocess.PIPE, text=True)
+                                stdout=subprocess.PIPE, text=True,
+                                env=HELPERS_ENV)
         proc.stdout.readline()
         time.sleep(rng.uniform(0, 0.3))
         proc.send_signal(signal.SIGKILL)

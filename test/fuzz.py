@@ -83,9 +83,11 @@ def hostile_model_files(valid, folder, marker):
     """
     Write bad model files derived from the ``valid`` one; return {kind: path}.
 
-    Kinds: truncated, empty, bit-flipped, wrong schema, wrong AP count (with
-    a matching checksum), and two pickle payloads that would create
-    ``marker`` if anything unpickled them.
+    Kinds: truncated, empty, bit-flipped, a damaged deflate stream, a zip
+    version no reader supports, a header nested too deeply to parse; wrong
+    schema, wrong AP count, provenance not an object, weights not finite
+    (each with a matching checksum); and two pickle payloads that would
+    create ``marker`` if anything unpickled them.
     """
     # the checksum, to forge a consistent file
     from wifi_place_recognition.core.artifact import _digest
@@ -102,6 +104,22 @@ def hostile_model_files(valid, folder, marker):
     flipped = bytearray(data)
     flipped[len(data) // 3] ^= 0x10
     write('bit_flipped', bytes(flipped))
+    damaged, version = bytearray(data), bytearray(data)
+    with zipfile.ZipFile(io.BytesIO(data)) as zf:
+        info = max(zf.infolist(), key=lambda i: i.compress_size)
+    local = info.header_offset    # 30 fixed bytes, then name and extra
+    start = local + 30 + int.from_bytes(data[local + 26:local + 28],
+                                        'little') + \
+        int.from_bytes(data[local + 28:local + 30], 'little')
+    middle = start + info.compress_size // 2
+    damaged[middle:middle + 4] = b'\xff' * 4
+    write('damaged_deflate', bytes(damaged))
+    central = version.find(b'PK\x01\x02')
+    version[central + 6] = 136    # "version needed to extract": 13.6
+    write('unsupported_zip_version', bytes(version))
+    np.savez(folder / 'deep_header.npz', header=np.frombuffer(
+        b'[' * 100000 + b']' * 100000, np.uint8))
+    files['deep_header'] = folder / 'deep_header.npz'
     write('pickle', pickle.dumps(_Payload(marker)))
     buf = io.BytesIO()
     np.save(buf, np.array([_Payload(marker)], dtype=object),
@@ -112,15 +130,20 @@ def hostile_model_files(valid, folder, marker):
     with np.load(valid, allow_pickle=False) as npz:
         arrays = {k: npz[k] for k in npz.files}
     header = json.loads(arrays.pop('header').tobytes())
-    for kind, change in (('wrong_schema', {'schema_version': 99}),
-                         ('wrong_ap_count',
-                          {'ap_ids': header['ap_ids'][:-1]})):
+    weight = header['members'][0][0]['weight']
+    for kind, change, arrays_change in (
+            ('wrong_schema', {'schema_version': 99}, {}),
+            ('wrong_ap_count', {'ap_ids': header['ap_ids'][:-1]}, {}),
+            ('provenance_not_an_object', {'provenance': []}, {}),
+            ('weights_not_finite', {},
+             {weight: np.full_like(arrays[weight], np.nan)})):
         forged = {k: v for k, v in header.items() if k != 'sha256'}
         forged.update(change)
-        forged['sha256'] = _digest(forged, arrays)
+        forged_arrays = {**arrays, **arrays_change}
+        forged['sha256'] = _digest(forged, forged_arrays)
         files[kind] = folder / f'{kind}.npz'
         np.savez(files[kind], header=np.frombuffer(
-            json.dumps(forged).encode(), np.uint8), **arrays)
+            json.dumps(forged).encode(), np.uint8), **forged_arrays)
     return files
 
 

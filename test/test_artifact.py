@@ -93,12 +93,26 @@ def test_an_npz_that_is_not_a_model(tmp_path):
 def test_every_hostile_file_is_refused_and_runs_nothing(synthetic, tmp_path):
     marker = tmp_path / 'PWNED'
     files = hostile_model_files(synthetic[1], tmp_path, marker)
-    assert len(files) == 7
+    assert len(files) == 12
     for kind, path in files.items():
         with pytest.raises(ModelFileError) as err:
             load_model(path)
         assert str(err.value).startswith(str(path)), kind
     assert not marker.exists()
+
+
+def test_a_model_that_would_not_load_is_never_written(synthetic, tmp_path):
+    model = load_model(synthetic[1])
+    path = tmp_path / 'm.npz'
+    save_model(model, path)
+    before = path.read_bytes()
+    model.members[0][0].weight[0, 0] = np.nan    # a training that diverged
+    with pytest.raises(ValueError, match=f'so {path} was not written: layer '
+                       f'member0.layer0.weight has values that are not '
+                       f'finite'):
+        save_model(model, path)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ['m.npz']
 
 
 def test_failed_write_keeps_the_previous_file(synthetic, tmp_path,

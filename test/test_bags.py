@@ -10,9 +10,11 @@ CSVs from bag_to_csv. Bad bags are refused in one line, nothing written.
 """
 
 import json
+import math
 import shutil
 
-from bag_helpers import (RUN, run_messages, scan_message, write_bag,
+from bag_helpers import (odometry_message, pose_message, RUN,
+                         run_messages, scan_message, write_bag,
                          write_ros1_bag)
 from conftest import python_module, run
 import numpy as np
@@ -184,6 +186,51 @@ def test_bad_bags_are_refused_in_one_line(tmp_path):
             ('backwards', backwards, 'time going backwards')):
         bag = _bag(tmp_path / name.replace(' ', '_'), messages)
         _refused([bag], tmp_path, message)
+
+
+def _stamp(message):
+    stamp = message[2].header.stamp
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def test_what_the_csvs_cannot_hold_is_left_out_and_counted(tmp_path):
+    messages = run_messages(seconds=30)
+    at = {topic: [i for i, m in enumerate(messages) if m[0] == topic]
+          for topic in ('/wifi/scan', '/odom', '/amcl_pose')}
+    i = at['/odom'][3]
+    messages[i] = messages[i][:2] + odometry_message(
+        _stamp(messages[i]), math.nan, 0.0, 0.0)
+    i = at['/amcl_pose'][1]
+    messages[i] = messages[i][:2] + pose_message(
+        _stamp(messages[i]), 1.0, 2.0, 0.0, math.inf, 0.0, 0.1, 0.1)
+    i = at['/wifi/scan'][2]
+    scan = messages[i][2]
+    messages[i] = messages[i][:2] + scan_message(
+        _stamp(messages[i]), list(scan.name) + ['a"b', 'c\rd'],
+        list(scan.position) + [-50.0, -50.0])
+    out = tmp_path / 'out'
+    result = run(python_module('cli.bag_to_csv', _bag(tmp_path, messages),
+                               '-o', out))
+    assert result.returncode == 0, result.stderr
+    for topic in ('/odom', '/amcl_pose'):
+        assert f'1 message(s) on {topic} with a pose or covariance that is ' \
+            f'not finite left out' in result.stderr, result.stderr
+    assert '0 scan(s) with no usable reading and 2 reading(s)' in \
+        result.stderr, result.stderr
+    fp = read_fingerprints(out / 'scans.csv')     # every file reads back
+    assert len(fp) == len(at['/wifi/scan'])
+    assert not any('"' in ap or '\r' in ap for ap in fp.ap_ids)
+    assert len(read_poses(out / 'odom.csv')) == len(at['/odom']) - 1
+    assert len(read_poses(out / 'poses.csv')) == len(at['/amcl_pose']) - 1
+    # a bag without odometry into that folder: its odom.csv would stay
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    no_odometry = [m for m in messages if m[0] != '/odom']
+    result = run(python_module('cli.bag_to_csv', _bag(
+        tmp_path / 'second', no_odometry), '-o', out))
+    assert result.returncode == 2 and result.stderr.startswith(
+        f'error: {out} holds odom.csv, which this export would leave '), \
+        result.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
 def test_a_missing_odometry_topic_is_named_by_the_tool_that_needs_it(

@@ -1,8 +1,10 @@
 """
-Bad paths and stamps given to fit_odometry, replay_run and train_model.
+Bad paths, options and stamps given to the offline tools.
 
 Every output is checked before any work (a folder, a missing folder, an
-input's file: refused, naming both, nothing written); replay_run refuses
+input's file: refused, naming both, nothing written); the replay tools
+refuse an option they do not know (a typo), a value out of range and a
+topic name ROS refuses, before they send anything; replay_run refuses
 streams whose time spans do not overlap or whose replay would take more
 than a day before it sends anything (it slept for years), and leaves out,
 counted, the odometry more than 10 s outside the scans' span;
@@ -14,10 +16,12 @@ scans it scored.
 
 import json
 import math
+import resource
 
 from conftest import python_module, run, surveyed_csv
 import numpy as np
 from test_fusion import straight
+from wifi_place_recognition.cli.common import json_ready
 from wifi_place_recognition.cli.replay_run import scored
 
 #: Seconds a command may take here: far less than a replay of a bad stamp.
@@ -94,6 +98,25 @@ def test_fit_odometry_counts_gaps_and_names_its_files(tmp_path,
     assert not (tmp_path / 'x.npz').exists()
 
 
+def test_fit_odometry_refuses_odometry_unlike_the_run(tmp_path,
+                                                      surveyed_model):
+    scans, _, odo = run_files(tmp_path)
+    still = odo.copy()
+    still[:, 1:] = 0.0                      # a robot that never moved
+    spinning = odo.copy()
+    spinning[:, 3] += odo[:, 1]             # turning 1 rad per m more
+    for rows, message in (
+            (still, 'the odometry drove 0 times the true distance'),
+            (spinning, 'its heading turns unlike the truth of')):
+        odom = write_odometry(tmp_path / 'odom-bad.csv', rows)
+        result = run(python_module(
+            'cli.fit_odometry', '--model', surveyed_model, '--data', scans,
+            '--odometry', odom, '-o', tmp_path / 'fitted.npz'),
+            timeout=QUICK)
+        refused(result, str(odom), message)
+        assert not (tmp_path / 'fitted.npz').exists()
+
+
 def test_no_output_is_written_when_one_cannot_be(tmp_path, surveyed_model):
     scans, odom, _ = run_files(tmp_path)
     model = tmp_path / 'model.npz'
@@ -132,6 +155,58 @@ def test_an_output_that_is_an_input_is_refused(tmp_path, surveyed_model):
         assert all(p.read_bytes() == data for p, data in kept.items()), args
         refused(result, message)
     assert not (tmp_path / 'm.npz').exists()
+
+
+def test_predictions_never_overwrite_the_data(tmp_path, surveyed_model):
+    scans, _, _ = run_files(tmp_path)
+    kept = scans.read_bytes()
+    (tmp_path / 'file').write_text('not a folder')
+    for args, message in (
+            (('cli.evaluate_model', '--model', surveyed_model, '--data',
+              scans, '--predictions', scans),
+             f'--predictions {scans} is the input --data {scans}'),
+            (('cli.evaluate_model', '--model', surveyed_model, '--data',
+              scans, '--predictions', tmp_path / 'p.csv', '--plot',
+              tmp_path / 'file'),
+             f'--plot {tmp_path}/file: is a file, not a folder'),
+            (('cli.evaluate_model', '--model', surveyed_model, '--data',
+              scans, '--predictions', tmp_path / 'p.csv',
+              '--plot-baseline', scans), 'give --plot'),
+            (('cli.replay_scans', '--data', scans, '--predictions', scans,
+              '--wait', '1'),
+             f'--predictions {scans} is the input --data {scans}')):
+        result = run(python_module(*args), timeout=QUICK)
+        assert scans.read_bytes() == kept, args
+        assert result.returncode == 2 and message in result.stderr, \
+            result.stderr
+        assert 'Traceback' not in result.stderr
+    assert not (tmp_path / 'p.csv').exists()
+
+
+def test_replay_options_out_of_range_typos_and_bad_topics_are_refused(
+        tmp_path):
+    scans, odom, _ = run_files(tmp_path)
+    replay = ('cli.replay_scans', '--data', scans, '--wait', '1')
+    for args, message in (
+            ((*replay, '--progress', '0'), '--progress must be at least 1'),
+            ((*replay, '--limit', '0'), '--limit must be at least 1'),
+            ((*replay, '--timeout', 'nan'),
+             '--timeout must be a finite number > 0, not nan'),
+            ((*replay, '--max-wait', '-1'), '--max-wait must be'),
+            ((*replay, '--rate', '-5'), '--rate must be'),
+            ((*replay, '--limt', '5'), 'unrecognized arguments: --limt 5'),
+            (('cli.replay_run', '--data', scans, '--odometry', odom,
+              '--wait', '1', '--sped', '5'), 'unrecognized arguments'),
+            ((*replay, '--place-topic', '1bad'),
+             "--place-topic '1bad' is not a valid topic name"),
+            (('cli.replay_run', '--data', scans, '--odometry', odom,
+              '--wait', '1', '--pose-topic', '1bad'),
+             "--pose-topic '1bad' is not a valid topic name")):
+        result = run(python_module(*args), timeout=QUICK)
+        assert result.returncode == 2 and message in result.stderr, \
+            (args, result.stderr)
+        assert 'Traceback' not in result.stderr, args
+        assert 'sent' not in result.stdout + result.stderr, args
 
 
 def test_replay_run_refuses_stamps_of_no_run_before_it_sends(tmp_path):
@@ -217,3 +292,56 @@ def test_odometry_alone_is_scored_inside_the_odometry_only(tmp_path):
     assert np.isnan(table[stamps < 20.0, 6:9]).all()
     np.testing.assert_allclose(table[stamps >= 20.0, 6:8],
                                true_xy[stamps >= 20.0], atol=1e-6)
+
+
+def test_waiting_for_the_node_does_not_spin_a_core(tmp_path):
+    # nothing answers: replay_run waits --wait seconds, then gives up; it
+    # spun a whole core while no node took its odometry
+    scans, odom, _ = run_files(tmp_path)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    result = run(python_module('cli.replay_run', '--data', scans,
+                               '--odometry', odom, '--wait', '8'),
+                 timeout=QUICK)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    assert result.returncode == 1 and 'error: ' in result.stderr, \
+        result.stderr
+    cpu = (after.ru_utime + after.ru_stime) - \
+        (before.ru_utime + before.ru_stime)
+    assert cpu < 4.0, cpu       # a busy wait takes the whole 8 s
+
+
+def test_the_same_data_given_twice_is_refused(tmp_path, surveyed_model):
+    scans, _, _ = run_files(tmp_path)
+    again = tmp_path / 'again.csv'
+    again.symlink_to(scans)
+    for args in (('cli.evaluate_model', '--model', surveyed_model, '--data',
+                  scans, again),
+                 ('cli.train_model', '--data', scans, scans, '-o',
+                  tmp_path / 'm.npz')):
+        refused(run(python_module(*args), timeout=QUICK), 'is given twice',
+                'its scans would count twice')
+    assert not (tmp_path / 'm.npz').exists()
+
+
+def test_data_with_no_usable_scan_is_refused(tmp_path, surveyed_model):
+    scans, _, _ = run_files(tmp_path)
+    lines = scans.read_text().splitlines()
+    header = lines[0].split(',')
+    x, y = header.index('X'), header.index('Y')
+    rows = [line.split(',') for line in lines[1:]]
+    for row in rows:
+        row[x] = row[y] = ''         # no pose: every row left out
+    unplaced = tmp_path / 'unplaced.csv'
+    unplaced.write_text('\n'.join([lines[0]] + [','.join(r) for r in rows])
+                        + '\n')
+    for tool in ('cli.evaluate_model', 'cli.survey_gaps'):
+        refused(run(python_module(tool, '--model', surveyed_model, '--data',
+                                  unplaced), timeout=QUICK),
+                f'data {unplaced}: no scan left to use')
+
+
+def test_json_outputs_write_null_for_what_is_not_finite():
+    value = {'mean_m': math.inf, 'runs': [1.5, math.nan, (2, -math.inf)],
+             'name': 'x'}
+    assert json.dumps(json_ready(value), allow_nan=False) == \
+        '{"mean_m": null, "runs": [1.5, null, [2, null]], "name": "x"}'

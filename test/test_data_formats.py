@@ -407,6 +407,23 @@ def test_a_pose_file_with_a_column_twice_is_refused(tmp_path):
     assert read_poses(path).tolist() == [[1, 2, 3, 0.5]]
 
 
+def test_lines_ending_in_lf_cr_lf_or_a_bare_cr_read_alike(tmp_path):
+    scans = ('WAP001,WAP002,LONGITUDE,LATITUDE,FLOOR,BUILDINGID\n'
+             '-60,100,1.5,2.5,0,0\n-70,-80,3.5,4.5,1,0\n')
+    poses = 'TIMESTAMP,X,Y,YAW\n0,0,0,0\n1,0.5,0,0.1\n'
+    read = {}
+    for name, end in (('lf', '\n'), ('crlf', '\r\n'), ('cr', '\r')):
+        (tmp_path / f'{name}.csv').write_bytes(
+            scans.replace('\n', end).encode())
+        (tmp_path / f'{name}-odom.csv').write_bytes(
+            poses.replace('\n', end).encode())
+        fp = read_fingerprints(tmp_path / f'{name}.csv')
+        read[name] = (fp.ap_ids, np.nan_to_num(fp.rssi).tolist(),
+                      fp.position.tolist(), fp.floor.tolist(),
+                      read_poses(tmp_path / f'{name}-odom.csv').tolist())
+    assert read['crlf'] == read['lf'] and read['cr'] == read['lf']
+
+
 # the real WiFine folders and the command line ----------------------------------
 
 def wifine(split):

@@ -141,6 +141,16 @@ def test_an_offline_tool_answers_help_and_starts_nothing(tmp_path, tool,
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize('tool', OFFLINE)
+def test_an_offline_tool_runs_as_a_module_too(tmp_path, tool):
+    module = EXECUTABLES[tool].split(':')[0]
+    env = dict(os.environ, ROS_LOG_DIR=str(tmp_path / 'ros_log'))
+    result = run([sys.executable, '-m', module, '--help'], env=env,
+                 cwd=tmp_path, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith(f'usage: {tool} [-h]'), result.stdout
+
+
 # The running nodes declare the tables' parameters and use their topics. ------
 def _resolve(name, node, params):
     name = name.format(**params)

@@ -131,6 +131,9 @@ def test_recording_widens_the_header_and_trains(tmp_path):
     log.add(['AA:BB:CC:00:00:02', 'AA:BB:CC:00:00:02'], [-80.0, -60.0], 0, 1,
             3.0)
     assert log.add(['a'], [float('inf')], 0, 1, 4.0) == (False, 1)
+    # names a CSV header cannot hold unquoted: left out, counted
+    assert log.add(['a,b', 'a"b', 'c\rd', 'e\nf'], [-50.0] * 4, 0, 1,
+                   5.0) == (False, 4)
     fp = read_fingerprints(path)
     assert fp.ap_ids == ('aa:bb:cc:00:00:01', 'aa:bb:cc:00:00:02')
     np.testing.assert_array_equal(fp.rssi, [[-50, np.nan], [-55, 0],

@@ -2,6 +2,7 @@
 
 import csv
 import json
+import math
 
 from conftest import (dataset_file, FAST, python_module, run, surveyed_csv,
                       synthetic_csv)
@@ -131,6 +132,18 @@ def test_bad_config_values_are_refused():
             TrainConfig(**{option: 'nearest'})
     with pytest.raises(ValueError, match='patience'):
         TrainConfig(patience=0)
+    # each of these crashed training (overflow, memory) or wrote NaN
+    for values, message in (
+            ({'augment_gain': math.inf}, "not {'augment_gain': inf}"),
+            ({'augment_noise': math.nan}, "not {'augment_noise': nan}"),
+            ({'augment_gain': 1.0}, 'gain and dropout < 1'),
+            ({'sae_layers': (10 ** 8,)}, 'layer sizes must be from 1 to'),
+            ({'learning_rate': 1e6}, 'learning rate in (0, 1], not 0 and'),
+            ({'seed': -1}, 'seed must be from 0 to 4294967295, not -1'),
+            ({'seed': 10 ** 20}, 'seed must be from 0')):
+        with pytest.raises(ValueError) as err:
+            TrainConfig(**values)
+        assert message in str(err.value), values
 
 
 def test_selection_stops_patience_epochs_after_the_best(synthetic):

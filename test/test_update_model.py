@@ -23,6 +23,7 @@ import pytest
 from ros_helpers import running_node
 from wifi_place_recognition.core.artifact import load_model, save_model
 from wifi_place_recognition.core.filter.particles import FusionParams
+from wifi_place_recognition.core.model_store import ModelStore, StoreError
 from wifi_place_recognition.core.tracking import TrackingParams
 from wifi_place_recognition.cli import update_model
 from wifi_place_recognition.core.references import PROVENANCE, \
@@ -415,6 +416,45 @@ def test_too_little_new_ground_builds_nothing(site, tmp_path):
     assert result.returncode == 2
     assert result.stderr.splitlines()[-1].startswith(
         'error: --min-new-scans -1'), result.stderr
+
+
+def test_a_recording_of_another_building_is_refused(site, tmp_path):
+    lines = (site / 'recorded.csv').read_text().splitlines(True)
+    foreign = tmp_path / 'foreign.csv'     # the same scans, other APs
+    foreign.write_text(lines[0].replace('aa:bb:cc:', 'de:ad:be:') +
+                       ''.join(lines[1:]))
+    models = tmp_path / 'models'
+    models.mkdir()
+    result = _references_only(site, models, '--model', site / 'in_use.npz',
+                              '--recorded', foreign)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.splitlines()[-1] == (
+        f'error: --recorded: {len(lines) - 1} of the {len(lines) - 1} '
+        f'recorded scans hear no AP the model in use ({site}/in_use.npz) '
+        f'knows: scans of another building, or APs named otherwise; '
+        f'nothing built'), result.stderr
+    assert list(models.iterdir()) == []
+    for option, value in (('--nice', '99999999999'), ('--ap-window', '1e308'),
+                          ('--tolerance-position', 'inf')):
+        result = _references_only(site, models, '--model',
+                                  site / 'in_use.npz', '--recorded',
+                                  site / 'recorded.csv', option, value)
+        assert result.returncode == 2, result.stderr
+        assert result.stderr.splitlines()[-1].startswith(
+            f'error: {option} '), result.stderr
+        assert 'Traceback' not in result.stderr
+    assert list(models.iterdir()) == []
+
+
+def test_a_history_naming_a_file_outside_the_folder_is_refused(tmp_path):
+    models = tmp_path / 'models'
+    models.mkdir()
+    (tmp_path / 'elsewhere.npz').write_bytes(b'not looked at')
+    for name in ('../elsewhere', str(tmp_path / 'elsewhere')):
+        (models / 'current').write_text(f'{name}\n')
+        with pytest.raises(StoreError, match=f'lists {name}, not a file '
+                           f'name of the folder'):
+            ModelStore(models).current()
 
 
 def _param_path(stdout):

@@ -52,6 +52,14 @@ def main(argv=None):
         [args.output / name for name in names]
     tables = [run_tables(r, options.building, options.floor)
               for r in recordings]
+    for folder, texts in zip(folders, tables):
+        stale = [name for name in FILES
+                 if name not in texts and (folder / name).exists()]
+        if stale:
+            raise ValueError(f'{folder} holds {", ".join(stale)}, which this '
+                             f'export would leave beside its own files (its '
+                             f'bag has no such topic): write to another '
+                             f'folder, or remove {stale[0]}')
     for folder in folders:
         folder.mkdir(parents=True, exist_ok=True)
     with ExitStack() as files:

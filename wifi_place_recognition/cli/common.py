@@ -3,6 +3,7 @@
 import argparse
 from dataclasses import dataclass, field, fields, replace
 import functools
+import math
 import os
 import sys
 from pathlib import Path
@@ -199,6 +200,11 @@ def read_run(given, options, what, role='train', small_classes=None):
     Odometry and poses (float64 rows: stamp, x, y, yaw, ...) come from
     bags; None from CSVs, or a bag without the topic.
     """
+    for i, path in enumerate(given or ()):
+        twice = next((p for p in given[:i] if same_file(p, path)), None)
+        if twice is not None:
+            raise DataError(f'{what}: {path} is given twice (as {twice}): '
+                            f'its scans would count twice')
     bags = [is_bag(p) for p in given or ()]
     if any(bags):
         if not all(bags):
@@ -214,6 +220,9 @@ def read_run(given, options, what, role='train', small_classes=None):
     reader = replace(options.reader, small_classes=small_classes)
     fp = read_fingerprints(given, role, reader)
     _print_notes(fp)
+    if not len(fp):
+        raise DataError(f'{what} {fp.source}: no scan left to use (the '
+                        f'notes above say why)')
     return fp, None, None
 
 
@@ -291,6 +300,45 @@ def check_outputs(outputs, inputs=()):
                              f'{folder} ({exc.strerror or exc})') from None
 
 
+def json_ready(value):
+    """
+    Return ``value`` with every non-finite float as None.
+
+    JSON has no NaN or infinity (``json.dumps`` writes tokens that strict
+    readers refuse): dump the result with ``allow_nan=False``.
+    """
+    if isinstance(value, dict):
+        return {k: json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_ready(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def option_message(exc):
+    """
+    Return an options object's error as the command line names it.
+
+    Its message starts with the field's name (``max_wait must be ...``):
+    the option's (``--max-wait must be ...``).
+    """
+    field, _, rest = str(exc).partition(' ')
+    return f'--{field.replace("_", "-")} {rest}'
+
+
+def topic_name(node, option, topic):
+    """Refuse (ValueError naming ``option``) a topic name ROS refuses."""
+    from rclpy.exceptions import NameValidationException
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+    try:
+        validate_full_topic_name(node.resolve_topic_name(topic))
+    except (NameValidationException, RuntimeError) as exc:
+        reason = str(exc).splitlines()[0].split(', at ')[0]  # no rcl source
+        raise ValueError(f'{option} {topic!r} is not a valid topic name '
+                         f'({reason})') from None
+
+
 def main_wrapper(main):
     """Turn bad input into ``error: ...`` and exit code 2, no traceback."""
     @functools.wraps(main)
@@ -308,7 +356,13 @@ def main_wrapper(main):
 def print_report(result, model, source):
     """Print the accuracies and the confusion matrix, human-readable."""
     print(f'{source}: {result["samples"]} scans '
-          f'({result["rows_without_ap"]} without any AP)')
+          f'({result["rows_without_ap"]} without any AP, '
+          f'{result["rows_without_known_ap"]} without an AP the model '
+          f'knows)')
+    if result['rows_without_known_ap'] > result['samples'] / 2:
+        print('note: most scans hear no AP the model knows: another '
+              'building than the model\'s, or APs named otherwise',
+              file=sys.stderr)
     for key in ('building_accuracy', 'floor_accuracy',
                 'building_floor_accuracy'):
         print(f'  {key.replace("_", " "):24s} {result[key]:.4f}')

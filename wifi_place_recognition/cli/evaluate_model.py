@@ -13,7 +13,8 @@ from ..core.metrics import (expected_calibration_error, reliability,
 from ..core.resources import default_model_path
 from ..data.predictions import write_predictions
 from .common import (add_data_arguments, add_download_arguments,
-                     data_options, main_wrapper, print_report, read_data)
+                     check_outputs, data_options, json_ready, main_wrapper,
+                     print_report, read_data)
 
 
 @main_wrapper
@@ -43,17 +44,26 @@ def main(argv=None):
     add_download_arguments(p)
     add_data_arguments(p)
     args = p.parse_args(argv)
+    if args.plot_baseline and not args.plot:
+        p.error('--plot-baseline draws in the --plot pictures: give --plot')
+    if args.plot and Path(args.plot).exists() and \
+            not Path(args.plot).is_dir():
+        p.error(f'--plot {args.plot}: is a file, not a folder')
+    check_outputs([('--predictions', args.predictions)],
+                  [('--model', args.model)] +
+                  [('--data', d) for d in args.data or ()] +
+                  [('--plot-baseline', d) for d in args.plot_baseline or ()])
     model = load_model(args.model or default_model_path())
     fp = read_data(args.data, data_options(args), 'data', role='test')
     result = evaluate(model, fp)
     predictions = result.pop('predictions')
     result['calibration'] = calibration(fp, predictions, model)
-    if args.predictions:
-        write_predictions(args.predictions, fp, predictions)
     if args.plot:
         _plot(args, model, fp, result, predictions)
+    if args.predictions:
+        write_predictions(args.predictions, fp, predictions)
     if args.json:
-        print(json.dumps(result))
+        print(json.dumps(json_ready(result), allow_nan=False))
     else:
         print_report(result, model, fp.source)
         c = result['calibration']

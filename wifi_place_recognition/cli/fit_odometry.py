@@ -11,7 +11,7 @@ from ..core.atomic import atomic_write
 from ..core.filter.odometry_fit import fit_odometry
 from ..core.filter.particles import FusionParams
 from .common import (add_data_arguments, add_model_arguments,
-                     check_outputs, data_options, main_wrapper,
+                     check_outputs, data_options, json_ready, main_wrapper,
                      model_output, read_pose_input, read_run)
 
 
@@ -72,7 +72,7 @@ def main(argv=None):
     model.fusion = params
     if args.report:
         with atomic_write(args.report, 'w') as f:
-            json.dump(report, f, indent=1)
+            json.dump(json_ready(report), f, indent=1, allow_nan=False)
     save_model(model, out)
     print(f'{fp.source}: {report["scans"]} posed scans inside the '
           f'odometry\'s time span ({report["scans_outside_odometry"]} '

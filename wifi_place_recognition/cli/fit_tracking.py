@@ -12,7 +12,7 @@ from ..core.atomic import atomic_write
 from ..core.tracking_fit import FitOptions, fit_tracking, walk_evidence
 from ..data.walks import walks
 from .common import (add_data_arguments, add_model_arguments,
-                     check_outputs, data_options, main_wrapper,
+                     check_outputs, data_options, json_ready, main_wrapper,
                      model_output, read_data)
 
 
@@ -60,7 +60,7 @@ def main(argv=None):
         created=time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())))
     if args.report:
         with atomic_write(args.report, 'w') as f:
-            json.dump(report, f, indent=1)
+            json.dump(json_ready(report), f, indent=1, allow_nan=False)
     save_model(model, out)
     rates = summary['rates']
     print(f'{fp.source}: {summary["walks"]} walks, {summary["scans"]} '

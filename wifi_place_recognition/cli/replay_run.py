@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
+from rclpy.utilities import remove_ros_args
 
 from ..core.atomic import atomic_write
 from ..core.filter.trajectory import (inside_span, odometry_alone, score,
@@ -17,7 +18,8 @@ from ..ros.run_replayer import (arrays, check_spans, ODOMETRY_MARGIN_S,
 from ..data.bags import is_bag, read_bags
 from ..data.poses import COVARIANCE_COLUMNS, POSE_COLUMNS, read_poses
 from .common import (add_data_arguments, check_outputs, data_options,
-                     main_wrapper, read_pose_input, read_run)
+                     json_ready, main_wrapper, option_message,
+                     read_pose_input, read_run, topic_name)
 
 #: What each column of the printed table is.
 WHO = (('single', 'each scan alone'),
@@ -71,12 +73,13 @@ def main(argv=None):
                    help='write each scan\'s truth, single-scan, odometry '
                         'and fused pose')
     add_data_arguments(p)
-    args, ros_args = p.parse_known_args(argv)
+    given = sys.argv[1:] if argv is None else list(argv)
+    args = p.parse_args(remove_ros_args(given))
     try:
         options = RunReplayOptions(args.place_topic, args.pose_topic,
                                    args.speed, args.wait)
     except ValueError as exc:
-        p.error(f'--{exc}')     # the message starts with the option's name
+        p.error(option_message(exc))
     check_outputs([('--json', args.json), ('--trajectory', args.trajectory)],
                   [('--data', d) for d in args.data] +
                   [('--odometry', args.odometry), ('--truth', args.truth)])
@@ -104,9 +107,14 @@ def main(argv=None):
               f'{ODOMETRY_MARGIN_S:g} s outside the scans\' time span '
               f'{time_span(fp.meta["TIMESTAMP"])})', file=sys.stderr,
               flush=True)
-    rclpy.init(args=ros_args)
+    rclpy.init(args=given)
     node = rclpy.create_node('run_replayer')
     try:
+        for option, topic in (('--place-topic', args.place_topic),
+                              ('--pose-topic', args.pose_topic),
+                              ('--localizer-topic', args.localizer_topic)):
+            if topic is not None:
+                topic_name(node, option, topic)
         results = replay_run(node, fp, odometry[send], options,
                              lambda s: print(s, file=sys.stderr, flush=True),
                              localizer)
@@ -138,7 +146,7 @@ def main(argv=None):
             f'{"-":>10s}' if v is None else f'{v:10.2f}' for v in cells))
     if args.json:
         with atomic_write(args.json, 'w') as f:
-            json.dump(scores, f, indent=1)
+            json.dump(json_ready(scores), f, indent=1, allow_nan=False)
     if args.trajectory:
         with atomic_write(args.trajectory, 'w') as f:
             f.write('TIMESTAMP,TRUE_X,TRUE_Y,TRUE_YAW,SCAN_X,SCAN_Y,ODOM_X,'

@@ -6,11 +6,13 @@ import sys
 import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
+from rclpy.utilities import remove_ros_args
 
 from ..data.predictions import write_predictions
 from ..ros.replayer import replay, ReplayOptions, summarise
 from .common import (add_data_arguments, add_download_arguments,
-                     data_options, main_wrapper, read_data)
+                     check_outputs, data_options, main_wrapper,
+                     option_message, read_data, topic_name)
 
 
 @main_wrapper
@@ -59,7 +61,10 @@ def main(argv=None):
                    help='write the answers in evaluate_model\'s format')
     add_download_arguments(p)
     add_data_arguments(p)
-    args, ros_args = p.parse_known_args(argv)
+    given = sys.argv[1:] if argv is None else list(argv)
+    args = p.parse_args(remove_ros_args(given))
+    check_outputs([('--predictions', args.predictions)],
+                  [('--data', d) for d in args.data or ()])
     fp = read_data(args.data, data_options(args), 'data', role='test')
     timed = 'TIMESTAMP' in fp.meta
     if args.realtime and not timed:
@@ -71,10 +76,11 @@ def main(argv=None):
             max_wait=args.max_wait, limit=args.limit, timeout=args.timeout,
             retries=args.retries, progress=args.progress)
     except ValueError as exc:
-        p.error(f'--realtime, --rate, --file-order: {exc}')
-    rclpy.init(args=ros_args)
+        p.error(option_message(exc))
+    rclpy.init(args=given)
     node = rclpy.create_node('scan_replayer')
     try:
+        topic_name(node, '--place-topic', args.place_topic)
         groups, answers = replay(node, fp, options,
                                  lambda s: print(s, file=sys.stderr,
                                                  flush=True))

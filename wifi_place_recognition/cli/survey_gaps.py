@@ -15,7 +15,7 @@ from ..core.coverage import (COVERED_M, OFF_SURVEY_BELOW,
 from ..core.gaps import gaps
 from ..core.resources import default_model_path
 from .common import (add_data_arguments, check_outputs, data_options,
-                     main_wrapper, read_data)
+                     json_ready, main_wrapper, read_data)
 
 
 @main_wrapper
@@ -83,7 +83,7 @@ def main(argv=None):
     if args.plot:
         _plot(args.plot, model, fp.position, found['off'], stretches, order)
     if args.json:
-        print(json.dumps(_finite(result), allow_nan=False))
+        print(json.dumps(json_ready(result), allow_nan=False))
         return 0
     print(f'{fp.source}: {len(fp)} scans, {result["scans_off_survey"]} off '
           f'the survey ({found["basis"]}); {len(stretches)} stretches of '
@@ -99,17 +99,6 @@ def main(argv=None):
     if args.plot:
         print(f'wrote {args.plot}')
     return 0
-
-
-def _finite(value):
-    """Return ``value`` with every non-finite float as None (for JSON)."""
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def off_survey(model, fp, covered_m):
@@ -176,3 +165,7 @@ def _plot(path, model, xy, off, stretches, order):
                  f'({int(off.sum())} scans)', fontsize=10)
     ax.legend(fontsize=8, loc='best')
     _save(plt, fig, path)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -33,6 +33,7 @@ from ..core.artifact import load_model, save_model
 from ..core.atomic import probe_folder
 from ..core.model_store import ModelStore, StoreError
 from ..core.coverage import COVERED_M
+from ..core.evaluation import align
 from ..core.pipeline.scan_pipeline import swap_problem
 from ..core.references import with_references
 from ..core.scan import normalize_ap_id, ScanMapper
@@ -50,6 +51,9 @@ REFUSED = 1
 #: The provenance key of the newest recorded scan a model learned (s).
 LEARNED_UNTIL = 'recorded_until'
 NODES = ('classifier_node', 'localization_monitor')
+#: The largest tolerance (accuracy, metres) or AP window (hours) taken,
+#: and the largest niceness (the lowest priority there is).
+MAX_TOLERANCE, MAX_NICE = 1e6, 19
 
 
 def build_parser():
@@ -194,12 +198,14 @@ def main(argv=None):
         for option in ('tolerance_accuracy', 'tolerance_position',
                        'ap_window'):
             value = getattr(args, option)
-            if not (math.isfinite(value) and value >= 0):
+            if not (math.isfinite(value) and 0 <= value <= MAX_TOLERANCE):
                 raise ValueError(f'--{option.replace("_", "-")} {value}: '
-                                 f'must be a finite number >= 0')
-        if args.nice < 0:
-            raise ValueError(f'--nice {args.nice}: must be >= 0 (only '
-                             f'lowering the priority needs no privilege)')
+                                 f'must be a number from 0 to '
+                                 f'{MAX_TOLERANCE:g}')
+        if not 0 <= args.nice <= MAX_NICE:
+            raise ValueError(f'--nice {args.nice}: must be from 0 to '
+                             f'{MAX_NICE} (only lowering the priority needs '
+                             f'no privilege)')
         if args.min_new_scans < 0:
             raise ValueError(f'--min-new-scans {args.min_new_scans}: must '
                              f'be >= 0')
@@ -220,6 +226,12 @@ def _update(args, store):
                        small_classes=args.small_classes)
     recorded = read_data(args.recorded, data, 'recorded scans',
                          small_classes='keep')
+    unknown = int(np.isnan(align(in_use, recorded)).all(axis=1).sum())
+    if unknown > len(recorded) / 2:
+        raise ValueError(f'--recorded: {unknown} of the {len(recorded)} '
+                         f'recorded scans hear no AP the model in use '
+                         f'({in_use_path}) knows: scans of another '
+                         f'building, or APs named otherwise; nothing built')
     stamps = recorded.meta.get(TIME)
     held = newest(stamps, len(recorded), args.holdout) & \
         _unlearned(in_use, stamps, len(recorded))

@@ -12,6 +12,7 @@ import ctypes
 import hashlib
 import json
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -59,7 +60,13 @@ def _digest(header, arrays):
 
 
 def save_model(model, path):
-    """Write ``model`` to ``path`` atomically."""
+    """
+    Write ``model`` to ``path`` atomically.
+
+    Raises ValueError, and writes nothing, for a model that
+    :func:`load_model` would refuse (e.g. weights that are not finite: a
+    training that diverged).
+    """
     arrays = dict(model.scaler.arrays())
     members = [_layer_specs(layers, f'member{m}.layer', arrays)
                for m, layers in enumerate(model.members)]
@@ -95,6 +102,11 @@ def save_model(model, path):
         raise ValueError(f'the model would unpack to {unpacked} bytes, more '
                          f'than a model file may ({MAX_UNPACKED_BYTES}): '
                          f'fewer reference scans or APs')
+    try:
+        _build(json.loads(json.dumps(header)), arrays)
+    except (KeyError, TypeError, ValueError, ArithmeticError) as exc:
+        raise ValueError(f'the model is not valid, so {path} was not '
+                         f'written: {exc}') from None
     header['sha256'] = _digest(header, arrays)
     arrays['header'] = np.frombuffer(json.dumps(header).encode(), np.uint8)
     with atomic_write(path) as f:
@@ -163,9 +175,10 @@ def _read(path):
             arrays = {k: npz[k] for k in npz.files}
     except ModelFileError:
         raise
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError) as exc:
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, zlib.error,
+            NotImplementedError) as exc:    # damaged or unsupported zip
         raise ModelFileError(f'not a model file, truncated or corrupt '
-                             f'({exc})') from None
+                             f'({exc or type(exc).__name__})') from None
     except (OSError, ValueError) as exc:
         raise ModelFileError(f'not a model file or corrupt ({exc})') from None
     raw = arrays.pop('header', None)
@@ -175,6 +188,9 @@ def _read(path):
         header = json.loads(raw.tobytes().decode())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ModelFileError(f'header is not valid JSON ({exc})') from None
+    except RecursionError:
+        raise ModelFileError('header is not a model\'s: nested too deeply') \
+            from None
     if not isinstance(header, dict) or header.get('format') != FORMAT:
         raise ModelFileError('not a wifi_place_recognition model')
     if header.get('schema_version') not in READABLE_SCHEMAS:
@@ -209,6 +225,8 @@ def _build(header, arrays):
             raise ModelFileError(f'{name} has shape {arrays[name].shape}, '
                                  f'expected ({len(ap_ids)},) for '
                                  f'{len(ap_ids)} APs')
+        if not np.isfinite(arrays[name]).all():
+            raise ModelFileError(f'{name} has values that are not finite')
     members = [_layers(specs, arrays, len(ap_ids), len(classes))
                for specs in header['members']]
     if not members and len(classes) > 1:
@@ -222,8 +240,11 @@ def _build(header, arrays):
                              'a position output')
     if position is None and 'coverage' in header:
         raise ModelFileError('a coverage section needs a position output')
-    return PlaceModel(ap_ids, scaler, members, classes,
-                      header.get('provenance', {}),
+    provenance = header.get('provenance', {})
+    if not isinstance(provenance, dict):
+        raise ModelFileError(f'provenance must be an object, not '
+                             f'{type(provenance).__name__}')
+    return PlaceModel(ap_ids, scaler, members, classes, provenance,
                       _section(header, TrackingParams),
                       position, _temperature(header),
                       _section(header, FusionParams),
@@ -329,6 +350,10 @@ def _layers(specs, arrays, n_inputs, n_outputs):
         if w.ndim != 2 or w.shape[1] != width or b.shape != (w.shape[0],):
             raise ModelFileError(f'layer {spec["weight"]} has shape '
                                  f'{w.shape}, expected (*, {width})')
+        if not (np.isfinite(w).all() and np.isfinite(b).all()):
+            raise ModelFileError(f'layer {spec["weight"]} has values that '
+                                 f'are not finite (a training that '
+                                 f'diverged?)')
         layers.append(Layer(w, b, spec['activation']))
         width = w.shape[0]
     if width != n_outputs:

@@ -65,6 +65,7 @@ def evaluate(model, fp):
     building, floor = model.classes[best, 0], model.classes[best, 1]
     result = accuracies(fp.building, fp.floor, building, floor)
     result['rows_without_ap'] = int(fp.empty_rows.sum())
+    result['rows_without_known_ap'] = int(np.isnan(rssi).all(axis=1).sum())
     result['confusion'] = confusion(model.classes, fp.building, fp.floor,
                                     building, floor).tolist()
     result['classes'] = model.class_names

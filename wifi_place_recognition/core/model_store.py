@@ -51,6 +51,10 @@ class ModelStore:
         except (OSError, UnicodeDecodeError) as exc:
             raise StoreError(f'{self.folder / HISTORY}: cannot read it '
                              f'({exc})') from None
+        outside = [n for n in names if Path(n).name != n or n in ('.', '..')]
+        if outside:
+            raise StoreError(f'{self.folder / HISTORY}: lists {outside[0]}, '
+                             f'not a file name of the folder')
         missing = [n for n in names
                    if not (self.folder / f'{n}.npz').is_file()]
         if missing:

@@ -34,7 +34,7 @@ import numpy as np
 from ..core.pose_label import blend, MAX_POSE_AGE, pair, Pose
 from ..core.rssi import clip_plausible, plausible
 from ..core.scan import normalize_ap_id, ScanMapper
-from .columns import TIME, YAW
+from .columns import TIME, writable_cell, YAW
 from .files import DataError
 from .fingerprints import Fingerprints
 from .poses import COVARIANCE_COLUMNS  # noqa: F401 (the poses' columns)
@@ -242,7 +242,16 @@ def _recording(path, rows, wanted):
         if not rows[kind]:
             raise DataError(f'{path}: topic {_named(wanted, kind)} has no '
                             f'message')
-        return np.array(rows[kind], np.float64)
+        out = np.array(rows[kind], np.float64)
+        finite = np.isfinite(out).all(axis=1)
+        if not finite.any():
+            raise DataError(f'{path}: topic {_named(wanted, kind)} has no '
+                            f'message with a finite pose')
+        if not finite.all():
+            notes.append(f'{path}: {int((~finite).sum())} message(s) on '
+                         f'{_named(wanted, kind)} with a pose or covariance '
+                         f'that is not finite left out')
+        return out[finite]
     return Recording(str(path), scans, table('odometry'), table('poses'),
                      _digest(path), notes)
 
@@ -260,7 +269,7 @@ def _readings(names, rssi):
     for name, value in zip([n for n, good in zip(names, ok) if good],
                            clip_plausible(rssi[ok])[0].tolist()):
         ap = normalize_ap_id(name)
-        if ap and ',' not in ap and '\n' not in ap:
+        if writable_cell(ap):
             best[ap] = max(best.get(ap, -np.inf), value)
     if not best:
         return None

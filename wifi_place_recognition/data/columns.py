@@ -38,6 +38,13 @@ POSITION_PAIRS = (('LONGITUDE', 'LATITUDE'), ('X', 'Y'))
 #: ``Fingerprints.meta`` keys of the device, time and heading columns.
 DEVICE, TIME, YAW = 'PHONEID', 'TIMESTAMP', 'YAW'
 NOT_DETECTED_MARKER = 100.0
+#: What a cell of the CSVs the package writes cannot hold (it quotes none).
+UNWRITABLE = ',"\r\n'
+
+
+def writable_cell(text):
+    """Return True when ``text`` can be a cell of the package's CSVs."""
+    return bool(text) and not any(c in text for c in UNWRITABLE)
 
 
 class FileColumns:

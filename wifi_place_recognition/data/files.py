@@ -10,6 +10,7 @@ import hashlib
 from pathlib import Path
 import urllib.request
 import zipfile
+import zlib
 
 from ..core.atomic import atomic_write
 
@@ -70,12 +71,18 @@ def digest(files):
 
 
 def decode(data, name):
-    """Return the text of a file's bytes (UTF-8, with or without BOM)."""
+    """
+    Return the text of a file's bytes (UTF-8, with or without BOM).
+
+    Lines may end in LF, CR LF or a bare CR: each becomes LF.
+    """
     try:
-        return data.decode('utf-8-sig')
+        text = data.decode('utf-8-sig')
     except UnicodeDecodeError as exc:
         raise DataError(f'{name}: not UTF-8 text ({exc.reason} at byte '
                         f'{exc.start})') from None
+    return text.replace('\r\n', '\n').replace('\r', '\n') if '\r' in text \
+        else text
 
 
 def _read_bytes(spec, role):
@@ -86,8 +93,10 @@ def _read_bytes(spec, role):
                 name = _zip_member(zf, member or ZIP_MEMBERS[role], archive)
                 return f'{archive}#{name}', zf.read(name)
         return spec, Path(spec).read_bytes()
-    except (OSError, zipfile.BadZipFile) as exc:
-        raise DataError(f'{spec}: cannot read: {exc}') from None
+    except (OSError, zipfile.BadZipFile, zlib.error, EOFError,
+            NotImplementedError) as exc:   # damaged or unsupported zip
+        raise DataError(f'{spec}: cannot read: {exc or type(exc).__name__}') \
+            from None
 
 
 def _zip_member(zf, wanted, archive):

@@ -27,7 +27,7 @@ import numpy as np
 from ..core.atomic import atomic_write, probe_folder
 from ..core.rssi import clip_plausible, plausible
 from ..core.scan import normalize_ap_id
-from .columns import NOT_DETECTED_MARKER
+from .columns import NOT_DETECTED_MARKER, writable_cell
 from .poses import POSE_COLUMNS
 
 LEADING = ('BUILDINGID', 'FLOOR', 'TIMESTAMP')
@@ -45,7 +45,7 @@ def frame_problem(frame):
     """Return why ``frame`` cannot be written as a FRAME cell, or None."""
     if not frame:
         return 'no frame_id'
-    if any(c in frame for c in ',"\r\n'):
+    if not writable_cell(frame):
         return f'frame_id {frame!r} has a comma, quote or line break'
     return None
 
@@ -203,7 +203,7 @@ class FingerprintLog:
         rssi[ok] = clip_plausible(rssi[ok])[0]
         for name, value, good in zip(names, rssi.tolist(), ok):
             ap = normalize_ap_id(name)
-            if not (good and ap) or ',' in ap or '\n' in ap:
+            if not (good and writable_cell(ap)):
                 skipped += 1
                 continue
             best[ap] = max(best.get(ap, -math.inf), value)

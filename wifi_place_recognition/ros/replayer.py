@@ -15,6 +15,7 @@ the CSV labels, overall and per walk.
 """
 
 from dataclasses import dataclass
+import math
 import time
 
 from builtin_interfaces.msg import Time
@@ -46,11 +47,27 @@ class ReplayOptions:
     progress: int = 100       # log every this many scans
 
     def __post_init__(self):
-        """Refuse options that contradict each other."""
-        if self.realtime < 0 or (self.realtime and self.rate):
-            raise ValueError('realtime must be >= 0, and not with a rate')
+        """Refuse values out of range and options that contradict."""
+        for name, low, strict in (('wait', 0, False), ('rate', 0, False),
+                                  ('realtime', 0, False),
+                                  ('max_wait', 0, True),
+                                  ('timeout', 0, True)):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and
+                    (value > low if strict else value >= low)):
+                raise ValueError(f'{name} must be a finite number '
+                                 f'{">" if strict else ">="} {low}, not '
+                                 f'{value!r}')
+        for name, low in (('limit', 1), ('retries', 0), ('progress', 1)):
+            value = getattr(self, name)
+            if value is not None and value < low:
+                raise ValueError(f'{name} must be at least {low}, not '
+                                 f'{value!r}')
+        if self.realtime and self.rate:
+            raise ValueError('realtime is not with a rate')
         if self.realtime and not self.by_walk:
-            raise ValueError('realtime replays walks: not with by_walk off')
+            raise ValueError('realtime replays walks in time order, not in '
+                             'file order')
 
 
 class Replayer:
@@ -76,12 +93,16 @@ class Replayer:
         if row is not None and msg.status:
             self.answers[row] = msg.status[0]
 
+    def ready(self):
+        """Return True once the node's subscription and answers are seen."""
+        return bool(self.pub.get_subscription_count() and
+                    self.node.count_publishers(self.place_topic))
+
     def wait_for_node(self, timeout):
-        """Spin until the node's subscription and answer topic are seen."""
+        """Spin (0.05 s at a time) until :meth:`ready`; False at timeout."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            if self.pub.get_subscription_count() and \
-                    self.node.count_publishers(self.place_topic):
+            if self.ready():
                 return True
             rclpy.spin_once(self.node, timeout_sec=0.05)
         return False

@@ -142,14 +142,10 @@ class RunReplayer(Replayer):
     def _on_pose(self, msg):
         self.poses[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = msg
 
-    def wait_for_node(self, timeout):
-        """Spin until the node takes scans and odometry and answers."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.odom_pub.get_subscription_count() and \
-                    super().wait_for_node(0.05):
-                return True
-        return False
+    def ready(self):
+        """Return True once the node takes scans and odometry and answers."""
+        return bool(self.odom_pub.get_subscription_count()) and \
+            super().ready()
 
 
 def replay_run(node, fp, odometry, options, log, localizer=None):

@@ -15,6 +15,8 @@ BATCH_BOUNDS = (32, 512)
 #: Which references a scan's position k-NN searches: those of its
 #: recognised floor, or of every floor of its building.
 SCOPES = ('floor', 'building')
+#: The widest layer, the largest learning rate and seed a recipe may have.
+MAX_WIDTH, MAX_LEARNING_RATE, MAX_SEED = 8192, 1.0, 2 ** 32 - 1
 
 
 @dataclass
@@ -63,10 +65,18 @@ class TrainConfig:
         """Check values so that a bad option fails before training starts."""
         self.sae_layers = tuple(int(n) for n in self.sae_layers)
         self.classifier_layers = tuple(int(n) for n in self.classifier_layers)
+        numbers = {name: getattr(self, name) for name in (
+            'dropout', 'not_detected', 'augment_offset', 'augment_gain',
+            'augment_noise', 'augment_dropout', 'learning_rate')}
         checks = [
-            (self.sae_layers and all(n > 0 for n in self.sae_layers +
+            (all(math.isfinite(v) for v in numbers.values()),
+             f'every number must be finite, not '
+             f'{ {k: v for k, v in numbers.items() if not math.isfinite(v)} }'),
+            (self.sae_layers and all(0 < n <= MAX_WIDTH for n in
+                                     self.sae_layers +
                                      self.classifier_layers),
-             'layer sizes must be positive (and sae_layers not empty)'),
+             f'layer sizes must be from 1 to {MAX_WIDTH} (and sae_layers not '
+             f'empty), not {self.sae_layers} and {self.classifier_layers}'),
             (self.activation in ACTIVATION_NAMES,
              f'activation must be one of {ACTIVATION_NAMES}'),
             (0.0 <= self.dropout < 1.0, 'dropout must be in [0, 1)'),
@@ -78,9 +88,11 @@ class TrainConfig:
             (self.grouping in GROUPINGS,
              f'grouping must be one of {GROUPINGS}'),
             (self.ensemble >= 1, 'ensemble must be at least 1'),
-            (self.batch_size >= 0 and self.learning_rate > 0,
-             'batch size must be >= 0 (0: from the data) and learning rate '
-             'positive'),
+            (self.batch_size >= 0 and
+             0 < self.learning_rate <= MAX_LEARNING_RATE,
+             f'batch size must be >= 0 (0: from the data) and learning rate '
+             f'in (0, {MAX_LEARNING_RATE:g}], not {self.batch_size} and '
+             f'{self.learning_rate!r}'),
             (self.position_representation in ('',) + SIGNALS,
              f'position_representation must be one of {SIGNALS} '
              f'(or empty: chosen by the folds)'),
@@ -91,9 +103,12 @@ class TrainConfig:
              f'position_scope must be one of {SCOPES} (or empty: chosen by '
              f'the folds)'),
             (min(self.augment_offset, self.augment_gain, self.augment_noise)
-             >= 0 and 0 <= self.augment_dropout < 1,
-             'augmentation amounts must be >= 0 (dropout < 1)'),
+             >= 0 and self.augment_gain < 1 and
+             0 <= self.augment_dropout < 1,
+             'augmentation amounts must be >= 0 (gain and dropout < 1)'),
             (self.threads >= 0, 'threads must be >= 0'),
+            (0 <= self.seed <= MAX_SEED,
+             f'seed must be from 0 to {MAX_SEED}, not {self.seed}'),
             (self.neighbours >= 0, 'neighbours must be >= 0'),
         ]
         for ok, message in checks:

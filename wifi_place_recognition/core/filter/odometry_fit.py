@@ -29,6 +29,9 @@ MIN_WINDOWS = 3
 #: The longest odometry gap a stretch may span (s): the node's default
 #: ``odom_timeout``.
 MAX_GAP_S = FusionLimits().odom_timeout
+#: The odometry's distance over the true one, and its drift (rad per m),
+#: beyond which it is not this run's odometry in metres and radians.
+DISTANCE_RATIO, MAX_DRIFT = (0.5, 2.0), 0.5
 
 
 class FitError(ValueError):
@@ -102,6 +105,19 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
     turn_error = (true_yaw[b] - true_yaw[a]) - (odo_yaw[b] - odo_yaw[a])
     rates = turn_error / distance
     drift = float(turn_error.sum() / distance.sum())
+    ratio = float(odo_steps[~across_gap].sum() / steps[~across_gap].sum())
+    if not DISTANCE_RATIO[0] <= ratio <= DISTANCE_RATIO[1]:
+        raise FitError(f'{odometry_name}: the odometry drove {ratio:.3g} '
+                       f'times the true distance of {run} ({spans}): not '
+                       f'this run\'s odometry, or not in metres (fitting '
+                       f'needs {DISTANCE_RATIO[0]:g} to '
+                       f'{DISTANCE_RATIO[1]:g})')
+    if abs(drift) > MAX_DRIFT:
+        raise FitError(f'{odometry_name}: its heading turns unlike the '
+                       f'truth of {run} by {math.degrees(drift):.3g} deg '
+                       f'per m: not this run\'s odometry, or its yaw not '
+                       f'in radians (fitting needs at most '
+                       f'{math.degrees(MAX_DRIFT):.3g})')
     spread = float(rates.std(ddof=1) / math.sqrt(len(rates)))
     fitted = replace(params, drift_mean=drift,
                      drift_sd=max(spread, MIN_DRIFT_SD),
@@ -110,8 +126,7 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
     report = {'scans': int(len(stamps)),
               'scans_outside_odometry': outside,
               'distance_m': float(travelled[-1]),
-              'odometry_distance_ratio': float(
-                  odo_steps[~across_gap].sum() / steps[~across_gap].sum()),
+              'odometry_distance_ratio': ratio,
               'windows': int(len(rates)),
               'windows_across_odometry_gaps': skipped,
               'odometry_gap_limit_s': MAX_GAP_S,
