@@ -192,6 +192,22 @@ def run(args, **kwargs):
                           env=kwargs.pop('env', os.environ.copy()), **kwargs)
 
 
+def save_unchecked(model, path):
+    """
+    Write ``model`` as ``save_model`` does, without its check.
+
+    A file that ``load_model`` must refuse, as a hand or another program
+    could write it (``save_model`` refuses to).
+    """
+    from wifi_place_recognition.core import artifact
+    build = artifact._build
+    artifact._build = lambda header, arrays: None
+    try:
+        artifact.save_model(model, path)
+    finally:
+        artifact._build = build
+
+
 def python_module(module, *args):
     """Return the argv that runs a package module with this interpreter."""
     return [sys.executable, '-m', f'wifi_place_recognition.{module}',

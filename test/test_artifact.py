@@ -101,6 +101,21 @@ def test_every_hostile_file_is_refused_and_runs_nothing(synthetic, tmp_path):
     assert not marker.exists()
 
 
+def test_a_header_nested_near_the_recursion_limit_is_refused(synthetic,
+                                                             tmp_path):
+    # just under the parser's limit, hashing the header hit it instead
+    header, arrays = _header_and_arrays(synthetic[1])
+    arrays.pop('header')
+    for depth in range(940, 1000, 4):
+        text = json.dumps(header)[:-1] + ', "deep": ' + '[' * depth + \
+            ']' * depth + '}'
+        path = tmp_path / f'deep{depth}.npz'
+        np.savez(path, header=np.frombuffer(text.encode(), np.uint8),
+                 **arrays)
+        with pytest.raises(ModelFileError):
+            load_model(path)
+
+
 def test_a_model_that_would_not_load_is_never_written(synthetic, tmp_path):
     model = load_model(synthetic[1])
     path = tmp_path / 'm.npz'

@@ -431,7 +431,8 @@ def test_a_recording_of_another_building_is_refused(site, tmp_path):
     assert result.stderr.splitlines()[-1] == (
         f'error: --recorded: {len(lines) - 1} of the {len(lines) - 1} '
         f'recorded scans hear no AP the model in use ({site}/in_use.npz) '
-        f'knows: scans of another building, or APs named otherwise; '
+        f'knows, and a references-only update keeps its APs: scans of '
+        f'another building, or APs replaced (a full update learns them); '
         f'nothing built'), result.stderr
     assert list(models.iterdir()) == []
     for option, value in (('--nice', '99999999999'), ('--ap-window', '1e308'),

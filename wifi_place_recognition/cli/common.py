@@ -10,6 +10,7 @@ from pathlib import Path
 
 from ..core.artifact import ModelFileError
 from ..core.atomic import probe_folder
+from ..core.evaluation import mostly_unknown
 from ..data.bags import BagOptions, is_bag, read_bags
 from ..data.files import DataError, download_uci
 from ..data.fingerprints import (read_fingerprints, ReaderOptions,
@@ -359,7 +360,7 @@ def print_report(result, model, source):
           f'({result["rows_without_ap"]} without any AP, '
           f'{result["rows_without_known_ap"]} without an AP the model '
           f'knows)')
-    if result['rows_without_known_ap'] > result['samples'] / 2:
+    if mostly_unknown(result['rows_without_known_ap'], result['samples']):
         print('note: most scans hear no AP the model knows: another '
               'building than the model\'s, or APs named otherwise',
               file=sys.stderr)

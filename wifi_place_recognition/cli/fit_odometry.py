@@ -70,10 +70,10 @@ def main(argv=None):
                   created=time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()))
     params.fit.update(report)
     model.fusion = params
+    save_model(model, out)      # first: a model it refuses, no report
     if args.report:
         with atomic_write(args.report, 'w') as f:
             json.dump(json_ready(report), f, indent=1, allow_nan=False)
-    save_model(model, out)
     print(f'{fp.source}: {report["scans"]} posed scans inside the '
           f'odometry\'s time span ({report["scans_outside_odometry"]} '
           f'outside), {report["distance_m"]:.1f} m driven in '

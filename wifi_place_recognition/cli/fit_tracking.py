@@ -58,10 +58,10 @@ def main(argv=None):
     model.tracking = replace(params, fit=dict(
         summary, walks=fp.source, walks_sha256=fp.sha256,
         created=time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())))
+    save_model(model, out)      # first: a model it refuses, no report
     if args.report:
         with atomic_write(args.report, 'w') as f:
             json.dump(json_ready(report), f, indent=1, allow_nan=False)
-    save_model(model, out)
     rates = summary['rates']
     print(f'{fp.source}: {summary["walks"]} walks, {summary["scans"]} '
           f'scans, {rates["hours"]:g} h, {rates["floor_changes"]} floor and '

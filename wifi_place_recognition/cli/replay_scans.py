@@ -1,6 +1,7 @@
 """``replay_scans``: publish a fingerprint CSV's rows as scans, score the node."""
 
 import argparse
+from dataclasses import replace
 import sys
 
 import numpy as np
@@ -63,20 +64,21 @@ def main(argv=None):
     add_data_arguments(p)
     given = sys.argv[1:] if argv is None else list(argv)
     args = p.parse_args(remove_ros_args(given))
+    try:    # checked before the data is read; by_walk needs its stamps
+        options = ReplayOptions(
+            place_topic=args.place_topic, wait=args.wait, rate=args.rate,
+            by_walk=not args.file_order, realtime=args.realtime,
+            max_wait=args.max_wait, limit=args.limit, timeout=args.timeout,
+            retries=args.retries, progress=args.progress)
+    except ValueError as exc:
+        p.error(option_message(exc))
     check_outputs([('--predictions', args.predictions)],
                   [('--data', d) for d in args.data or ()])
     fp = read_data(args.data, data_options(args), 'data', role='test')
     timed = 'TIMESTAMP' in fp.meta
     if args.realtime and not timed:
         p.error(f'--realtime: {fp.source} has no TIMESTAMP column')
-    try:
-        options = ReplayOptions(
-            place_topic=args.place_topic, wait=args.wait, rate=args.rate,
-            by_walk=timed and not args.file_order, realtime=args.realtime,
-            max_wait=args.max_wait, limit=args.limit, timeout=args.timeout,
-            retries=args.retries, progress=args.progress)
-    except ValueError as exc:
-        p.error(option_message(exc))
+    options = replace(options, by_walk=timed and not args.file_order)
     rclpy.init(args=given)
     node = rclpy.create_node('scan_replayer')
     try:

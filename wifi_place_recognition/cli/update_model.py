@@ -33,7 +33,7 @@ from ..core.artifact import load_model, save_model
 from ..core.atomic import probe_folder
 from ..core.model_store import ModelStore, StoreError
 from ..core.coverage import COVERED_M
-from ..core.evaluation import align
+from ..core.evaluation import align, mostly_unknown, rows_without_known_ap
 from ..core.pipeline.scan_pipeline import swap_problem
 from ..core.references import with_references
 from ..core.scan import normalize_ap_id, ScanMapper
@@ -226,12 +226,14 @@ def _update(args, store):
                        small_classes=args.small_classes)
     recorded = read_data(args.recorded, data, 'recorded scans',
                          small_classes='keep')
-    unknown = int(np.isnan(align(in_use, recorded)).all(axis=1).sum())
-    if unknown > len(recorded) / 2:
+    unknown = rows_without_known_ap(align(in_use, recorded))
+    if train is None and mostly_unknown(unknown, len(recorded)):
         raise ValueError(f'--recorded: {unknown} of the {len(recorded)} '
                          f'recorded scans hear no AP the model in use '
-                         f'({in_use_path}) knows: scans of another '
-                         f'building, or APs named otherwise; nothing built')
+                         f'({in_use_path}) knows, and a references-only '
+                         f'update keeps its APs: scans of another building,'
+                         f' or APs replaced (a full update learns them); '
+                         f'nothing built')
     stamps = recorded.meta.get(TIME)
     held = newest(stamps, len(recorded), args.holdout) & \
         _unlearned(in_use, stamps, len(recorded))

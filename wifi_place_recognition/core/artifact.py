@@ -46,6 +46,11 @@ LOCATOR_ARRAYS = ('group_start', 'group', 'ap_start', 'ap_column', 'scale',
 MAX_INDEX = 1 << 24
 
 
+#: What reading a damaged or unsupported zip archive raises.
+ZIP_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, zlib.error,
+              NotImplementedError)
+
+
 class ModelFileError(ValueError):
     """A model file that cannot be loaded; the message says why."""
 
@@ -135,6 +140,9 @@ def load_model(path):
         raise ModelFileError(f'{path}: {exc}') from None
     except (KeyError, TypeError, ValueError, ArithmeticError) as exc:
         raise ModelFileError(f'{path}: malformed model file ({exc})') from None
+    except RecursionError:      # reading or hashing the header
+        raise ModelFileError(f'{path}: header nested too deeply: not a '
+                             f'model file') from None
     finally:
         _release_freed_memory()
 
@@ -175,10 +183,9 @@ def _read(path):
             arrays = {k: npz[k] for k in npz.files}
     except ModelFileError:
         raise
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, zlib.error,
-            NotImplementedError) as exc:    # damaged or unsupported zip
+    except ZIP_ERRORS as exc:
         raise ModelFileError(f'not a model file, truncated or corrupt '
-                             f'({exc or type(exc).__name__})') from None
+                             f'({str(exc) or type(exc).__name__})') from None
     except (OSError, ValueError) as exc:
         raise ModelFileError(f'not a model file or corrupt ({exc})') from None
     raw = arrays.pop('header', None)
@@ -188,9 +195,6 @@ def _read(path):
         header = json.loads(raw.tobytes().decode())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ModelFileError(f'header is not valid JSON ({exc})') from None
-    except RecursionError:
-        raise ModelFileError('header is not a model\'s: nested too deeply') \
-            from None
     if not isinstance(header, dict) or header.get('format') != FORMAT:
         raise ModelFileError('not a wifi_place_recognition model')
     if header.get('schema_version') not in READABLE_SCHEMAS:

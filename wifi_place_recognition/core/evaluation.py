@@ -47,6 +47,21 @@ def scan_answers(model, fp, widened=True):
                                    unknown=unknown_aps(model, fp))
 
 
+def rows_without_known_ap(rssi):
+    """Return how many scans (:func:`align`'s rows) hear no AP it knows."""
+    return int(np.isnan(rssi).all(axis=1).sum())
+
+
+def mostly_unknown(without, total):
+    """
+    Return True when most of ``total`` scans hear no AP the model knows.
+
+    ``without``: :func:`rows_without_known_ap`'s count; the scans are
+    then likely of another building (or name their APs otherwise).
+    """
+    return without > total / 2
+
+
 def evaluate(model, fp):
     """
     Return accuracies, predictions and the confusion matrix.
@@ -65,7 +80,7 @@ def evaluate(model, fp):
     building, floor = model.classes[best, 0], model.classes[best, 1]
     result = accuracies(fp.building, fp.floor, building, floor)
     result['rows_without_ap'] = int(fp.empty_rows.sum())
-    result['rows_without_known_ap'] = int(np.isnan(rssi).all(axis=1).sum())
+    result['rows_without_known_ap'] = rows_without_known_ap(rssi)
     result['confusion'] = confusion(model.classes, fp.building, fp.floor,
                                     building, floor).tolist()
     result['classes'] = model.class_names

@@ -230,8 +230,8 @@ def _recording(path, rows, wanted):
     if left_out or readings:
         notes.append(f'{path}: {left_out} scan(s) with no usable reading '
                      f'and {readings} reading(s) (RSSI not finite or '
-                     f'implausible, or names and RSSI of different '
-                     f'lengths) left out')
+                     f'implausible, an AP name a CSV cell cannot hold, or '
+                     f'names and RSSI of different lengths) left out')
     for topic, (kind, _) in wanted.items():
         if kind != 'scans' and kind not in rows:
             notes.append(f'{path}: no topic {topic} (the {kind})')

@@ -10,8 +10,8 @@ import hashlib
 from pathlib import Path
 import urllib.request
 import zipfile
-import zlib
 
+from ..core.artifact import ZIP_ERRORS
 from ..core.atomic import atomic_write
 
 UCI_URL = 'https://archive.ics.uci.edu/static/public/310/ujiindoorloc.zip'
@@ -93,10 +93,9 @@ def _read_bytes(spec, role):
                 name = _zip_member(zf, member or ZIP_MEMBERS[role], archive)
                 return f'{archive}#{name}', zf.read(name)
         return spec, Path(spec).read_bytes()
-    except (OSError, zipfile.BadZipFile, zlib.error, EOFError,
-            NotImplementedError) as exc:   # damaged or unsupported zip
-        raise DataError(f'{spec}: cannot read: {exc or type(exc).__name__}') \
-            from None
+    except (OSError, *ZIP_ERRORS) as exc:
+        raise DataError(f'{spec}: cannot read: '
+                        f'{str(exc) or type(exc).__name__}') from None
 
 
 def _zip_member(zf, wanted, archive):

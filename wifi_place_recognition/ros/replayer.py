@@ -64,10 +64,10 @@ class ReplayOptions:
                 raise ValueError(f'{name} must be at least {low}, not '
                                  f'{value!r}')
         if self.realtime and self.rate:
-            raise ValueError('realtime is not with a rate')
+            raise ValueError('realtime is not with --rate')
         if self.realtime and not self.by_walk:
-            raise ValueError('realtime replays walks in time order, not in '
-                             'file order')
+            raise ValueError('realtime replays walks in time order, not '
+                             'with --file-order')
 
 
 class Replayer:
