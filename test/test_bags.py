@@ -188,6 +188,22 @@ def test_bad_bags_are_refused_in_one_line(tmp_path):
         _refused([bag], tmp_path, message)
 
 
+def test_bag_options_out_of_range_are_refused_before_reading(tmp_path):
+    bag = _bag(tmp_path, run_messages(seconds=10))
+    (tmp_path / 'file').write_text('not a folder')
+    for args, message in (
+            (('--bag-floor', str(10 ** 10)), 'labels are from 0 to'),
+            (('--bag-building', '-1'), 'labels are from 0 to'),
+            (('-o', tmp_path / 'file'), f'-o {tmp_path}/file: is a file')):
+        argv = ['-o', tmp_path / 'out', *args] if args[0] != '-o' else \
+            list(args)
+        result = run(python_module('cli.bag_to_csv', bag, *argv))
+        assert result.returncode == 2 and result.stderr.startswith(
+            'error: ') and message in result.stderr, result.stderr
+    assert not (tmp_path / 'out').exists()
+    assert (tmp_path / 'file').read_text() == 'not a folder'
+
+
 def _stamp(message):
     stamp = message[2].header.stamp
     return stamp.sec + stamp.nanosec * 1e-9

@@ -115,6 +115,12 @@ def test_bad_walks_are_refused_naming_what_is_wrong(synthetic, scans,
         assert 'error:' in result.stderr and expected[name] in \
             result.stderr, (name, result.stderr)
         assert 'Traceback' not in result.stderr
+    walk_path = tmp_path / 'walk.csv'
+    for timeout in ('inf', 'nan', '0'):
+        result = fit('--model', model_path, '--walks', walk_path,
+                     '--timeout', timeout)
+        assert result.returncode == 2 and '--timeout must be a finite ' \
+            'number > 0' in result.stderr, result.stderr
     # the model's own training data: its probabilities are over-confident
     result = fit('--model', model_path, '--walks', csv_path)
     assert result.returncode == 2

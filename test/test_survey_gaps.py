@@ -117,3 +117,10 @@ def test_bad_arguments_are_refused_with_one_line(holed, capsys, tmp_path):
     assert main(['--model', str(model), '--data', str(run), '--plot',
                  str(tmp_path / 'no' / 'x.png')]) == 2
     assert 'no folder' in capsys.readouterr().err
+    # a name matplotlib cannot write: refused before the work, not after
+    assert main(['--model', str(model), '--data', str(run), '--plot',
+                 str(tmp_path / 'gaps.txt')]) == 2
+    captured = capsys.readouterr()
+    assert f'--plot {tmp_path}/gaps.txt: not a picture file name (one of ' \
+        in captured.err and not captured.out, captured
+    assert not (tmp_path / 'gaps.txt').exists()

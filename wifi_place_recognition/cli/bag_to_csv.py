@@ -38,6 +38,8 @@ def main(argv=None):
                         'sub-folder per bag, named after it')
     add_bag_arguments(p)
     args = p.parse_args(argv)
+    if args.output.exists() and not args.output.is_dir():
+        raise ValueError(f'-o {args.output}: is a file, not a folder')
     options = bag_options(args)
     for bag in args.bags:
         if not is_bag(bag):

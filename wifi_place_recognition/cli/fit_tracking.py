@@ -3,6 +3,7 @@
 import argparse
 from dataclasses import replace
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -39,8 +40,8 @@ def main(argv=None):
                    help='also write the figures and the grids searched')
     add_data_arguments(p)
     args = p.parse_args(argv)
-    if not args.timeout > 0:
-        p.error('--timeout must be > 0')
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        p.error(f'--timeout must be a finite number > 0, not {args.timeout}')
     option, out = model_output(args)
     check_outputs([(option, out), ('--report', args.report)],
                   [('--walks', w) for w in args.walks] +

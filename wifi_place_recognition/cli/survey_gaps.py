@@ -55,6 +55,8 @@ def main(argv=None):
     if args.min_scans < 1:
         raise ValueError(f'--min-scans {args.min_scans}: expected >= 1')
     check_outputs([('--plot', args.plot)], [('--model', args.model)])
+    if args.plot:
+        _picture_format(args.plot)
     model = load_model(args.model or default_model_path())
     if model.position is None:
         raise ValueError('the model has no position output: train it with '
@@ -140,6 +142,18 @@ def off_survey(model, fp, covered_m):
         fp.position).all(axis=1),
         'basis': f'no survey scan within {covered_m:g} m',
         'strangers': strangers}
+
+
+def _picture_format(path):
+    """Refuse, before any work, a picture file matplotlib cannot write."""
+    try:
+        from matplotlib.backend_bases import FigureCanvasBase
+    except ImportError as exc:
+        raise ValueError(f'--plot needs matplotlib ({exc})') from None
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if Path(path).suffix[1:].lower() not in formats:
+        raise ValueError(f'--plot {path}: not a picture file name (one of '
+                         f'.{", .".join(sorted(formats))})')
 
 
 def _plot(path, model, xy, off, stretches, order):

@@ -38,6 +38,7 @@ from .columns import TIME, writable_cell, YAW
 from .files import DataError
 from .fingerprints import Fingerprints
 from .poses import COVARIANCE_COLUMNS  # noqa: F401 (the poses' columns)
+from .table import MAX_LABEL
 
 SCAN_TYPE = 'sensor_msgs/msg/JointState'
 ODOMETRY_TYPE = 'nav_msgs/msg/Odometry'
@@ -67,9 +68,11 @@ class BagOptions:
         """Refuse options that cannot work, before any bag is read."""
         if not _topic(self.scan_topic):
             raise DataError('no scan topic given')
-        if self.building < 0 or self.floor < 0:
+        if not (0 <= self.building <= MAX_LABEL and
+                0 <= self.floor <= MAX_LABEL):
             raise DataError(f'building {self.building}, floor '
-                            f'{self.floor}: labels are >= 0')
+                            f'{self.floor}: labels are from 0 to '
+                            f'{MAX_LABEL}')
 
 
 @dataclass
