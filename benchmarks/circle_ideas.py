@@ -151,6 +151,22 @@ def loud_circles(circle, x, loud_m):
     return out
 
 
+def survey_classes(model, fp):
+    """Return the model's class index of each of a survey's scans."""
+    index = {tuple(int(v) for v in c): i for i, c in enumerate(model.classes)}
+    return np.array([index[(int(b), int(f))]
+                     for b, f in zip(fp.building, fp.floor)])
+
+
+def kept_locator(model, rssi, y, xy, keep):
+    """Return the model's locator rebuilt on the ``keep`` scans only."""
+    pos = model.position
+    return Locator.build(rssi[keep], y[keep], xy[keep], len(model.classes),
+                         pos.neighbours, pos.sigma, pos.columns,
+                         pos.representation, pos.metric, pos.group,
+                         pos.edge_sigma)
+
+
 def calibrated_loud_m(model, fp):
     """
     Return (m, scans it learned from): the loudness widening of a survey.
@@ -160,19 +176,12 @@ def calibrated_loud_m(model, fp):
     that puts 95 % of those louder than the kept references by more
     than CALIBRATED_K within their circle (0 with fewer than 10).
     """
-    pos, rssi = model.position, align(model, fp)
-    index = {tuple(int(v) for v in c): i for i, c in enumerate(model.classes)}
-    y = np.array([index[(int(b), int(f))]
-                  for b, f in zip(fp.building, fp.floor)])
+    pos, rssi, y = model.position, align(model, fp), survey_classes(model, fp)
     config = TrainConfig()
     error, sigma, x = [], [], []
     for held in grouped_folds(fp, y, config.folds, config.grouping,
                               config.seed).held_out:
-        keep = ~held
-        locator = Locator.build(
-            rssi[keep], y[keep], fp.position[keep], len(model.classes),
-            pos.neighbours, pos.sigma, pos.columns, pos.representation,
-            pos.metric, pos.group, pos.edge_sigma)
+        locator = kept_locator(model, rssi, y, fp.position, ~held)
         for row, c, truth in zip(rssi[held], y[held], fp.position[held]):
             cols = np.flatnonzero(~np.isnan(row))
             distance = locator.distances(
@@ -208,18 +217,13 @@ def cut_examples(model, survey_csv, seed=0):
     """
     fp = read_fingerprints(survey_csv)
     rssi, xy, pos = align(model, fp), fp.position, model.position
-    index = {tuple(int(v) for v in c): i for i, c in enumerate(model.classes)}
-    y = np.array([index[(int(b), int(f))]
-                  for b, f in zip(fp.building, fp.floor)])
+    y = survey_classes(model, fp)
     rng = np.random.default_rng(seed)
     x, covered, answers = [], [], []
     for _ in range(CUTTINGS):
         cut = cut_places(xy, y, rng)
         keep = ~cut
-        locator = Locator.build(
-            rssi[keep], y[keep], xy[keep], len(model.classes),
-            pos.neighbours, pos.sigma, pos.columns, pos.representation,
-            pos.metric, pos.group, pos.edge_sigma)
+        locator = kept_locator(model, rssi, y, xy, keep)
         covered.append(distance_by_place(xy[cut], y[cut], xy[keep],
                                          y[keep]) <= COVERED_M)
         for row, c, truth in zip(rssi[cut], y[cut], xy[cut]):
@@ -237,13 +241,16 @@ def cut_examples(model, survey_csv, seed=0):
     return x[ok], np.concatenate(covered)[ok], *answers[ok].T
 
 
-def pair(model, survey_csv, test, kept):
-    """Return the circle figures of one test run with one survey's model."""
+def pair(model, survey_csv, test, kept, calibrated):
+    """
+    Return the circle figures of one test run with one survey's model.
+
+    ``calibrated``: the survey's :func:`calibrated_loud_m`.
+    """
     rssi = align(model, test.fp)
     proba, xy, circle, p = model.predict_positions(rssi, coverage=True)
     loud = excesses(model.position, rssi, proba.argmax(axis=1))
-    loud_m, loud_scans = calibrated_loud_m(model,
-                                           read_fingerprints(survey_csv))
+    loud_m, loud_scans = calibrated
     knn = model.predict_positions(rssi, widened=False)[2]
     side = np.array([model.position.one_sidedness(a, c)
                      if np.isfinite(a).all() else np.nan
@@ -433,12 +440,15 @@ def main():
                            '--quiet')
                     model = load_model(path)
                     kept = kept[np.isfinite(kept).all(axis=1)]
+                    calibrated = calibrated_loud_m(model,
+                                                   read_fingerprints(scans))
                     for test in runs:
                         if test is train:
                             continue
                         name = (f'{test.name} <- {train.name}, '
                                 f'{"holes" if holes else "full"}')
-                        f = results[name] = pair(model, scans, test, kept)
+                        f = results[name] = pair(model, scans, test, kept,
+                                                 calibrated)
                         if names is None:
                             names = [n for n in ALL
                                      if n in f['in_95_circle']]

@@ -111,8 +111,7 @@ def hostile_model_files(valid, folder, marker):
     start = local + 30 + int.from_bytes(data[local + 26:local + 28],
                                         'little') + \
         int.from_bytes(data[local + 28:local + 30], 'little')
-    middle = start + info.compress_size // 2
-    damaged[middle:middle + 4] = b'\xff' * 4
+    damaged[start] = 0xff    # the first deflate block: a reserved type
     write('damaged_deflate', bytes(damaged))
     central = version.find(b'PK\x01\x02')
     version[central + 6] = 136    # "version needed to extract": 13.6

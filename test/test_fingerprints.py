@@ -96,6 +96,23 @@ def test_reads_members_of_the_uci_zip(tmp_path):
         read_fingerprints(f'{archive}#nope.csv')
 
 
+def test_a_damaged_member_of_a_zip_is_one_clear_error(tmp_path):
+    archive = tmp_path / 'uci.zip'
+    with zipfile.ZipFile(archive, 'w', zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr('trainingData.csv',
+                    synthetic_csv(tmp_path / 'x.csv').read_text())
+    data = bytearray(archive.read_bytes())
+    with zipfile.ZipFile(archive) as zf:
+        info = zf.infolist()[0]
+    local = info.header_offset    # 30 fixed bytes, then name and extra
+    data[local + 30 + int.from_bytes(data[local + 26:local + 28], 'little')
+         + int.from_bytes(data[local + 28:local + 30], 'little')] = 0xff
+    archive.write_bytes(bytes(data))     # its first deflate block: reserved
+    with pytest.raises(DataError, match='cannot read: Error -3 while '
+                                        'decompressing data'):
+        read_fingerprints(archive, role='train')
+
+
 def test_download_verifies_the_training_member(tmp_path):
     text = synthetic_csv(tmp_path / 'x.csv').read_text()
     archive = _uci_zip(tmp_path / 'uci.zip', text)

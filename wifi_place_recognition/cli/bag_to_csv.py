@@ -12,7 +12,8 @@ from ..data.bags import (is_bag, pose_labels, read_bag,
                          scan_matrix)
 from ..data.columns import NOT_DETECTED_MARKER
 from ..data.poses import COVARIANCE_COLUMNS, POSE_COLUMNS
-from .common import add_bag_arguments, bag_options, main_wrapper
+from .common import (add_bag_arguments, bag_options, check_output_folder,
+                     main_wrapper)
 
 #: The files of a run, as in the shared robot runs.
 FILES = ('scans.csv', 'odom.csv', 'poses.csv')
@@ -38,8 +39,7 @@ def main(argv=None):
                         'sub-folder per bag, named after it')
     add_bag_arguments(p)
     args = p.parse_args(argv)
-    if args.output.exists() and not args.output.is_dir():
-        raise ValueError(f'-o {args.output}: is a file, not a folder')
+    check_output_folder('-o', args.output)
     options = bag_options(args)
     for bag in args.bags:
         if not is_bag(bag):

@@ -301,6 +301,12 @@ def check_outputs(outputs, inputs=()):
                              f'{folder} ({exc.strerror or exc})') from None
 
 
+def check_output_folder(option, path):
+    """Refuse (ValueError naming ``option``) an output folder that is a file."""
+    if path is not None and Path(path).exists() and not Path(path).is_dir():
+        raise ValueError(f'{option} {path}: is a file, not a folder')
+
+
 def json_ready(value):
     """
     Return ``value`` with every non-finite float as None.

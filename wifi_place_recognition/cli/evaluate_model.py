@@ -13,8 +13,8 @@ from ..core.metrics import (expected_calibration_error, reliability,
 from ..core.resources import default_model_path
 from ..data.predictions import write_predictions
 from .common import (add_data_arguments, add_download_arguments,
-                     check_outputs, data_options, json_ready, main_wrapper,
-                     print_report, read_data)
+                     check_output_folder, check_outputs, data_options,
+                     json_ready, main_wrapper, print_report, read_data)
 
 
 @main_wrapper
@@ -46,9 +46,7 @@ def main(argv=None):
     args = p.parse_args(argv)
     if args.plot_baseline and not args.plot:
         p.error('--plot-baseline draws in the --plot pictures: give --plot')
-    if args.plot and Path(args.plot).exists() and \
-            not Path(args.plot).is_dir():
-        p.error(f'--plot {args.plot}: is a file, not a folder')
+    check_output_folder('--plot', args.plot)
     check_outputs([('--predictions', args.predictions)],
                   [('--model', args.model)] +
                   [('--data', d) for d in args.data or ()] +

@@ -12,11 +12,11 @@ import ctypes
 import hashlib
 import json
 import zipfile
-import zlib
 from pathlib import Path
 
 import numpy as np
 
+from .archive import ZIP_ERRORS
 from .atomic import atomic_write
 from .coverage import CoverageModel
 from .locator import LEVELS, Locator, MAX_EDGE_SIGMA_M, METRICS
@@ -44,11 +44,6 @@ MAX_UNPACKED_BYTES = 1 << 30
 LOCATOR_ARRAYS = ('group_start', 'group', 'ap_start', 'ap_column', 'scale',
                   'codes', 'norms', 'xy', 'sigma')
 MAX_INDEX = 1 << 24
-
-
-#: What reading a damaged or unsupported zip archive raises.
-ZIP_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, zlib.error,
-              NotImplementedError)
 
 
 class ModelFileError(ValueError):

@@ -11,7 +11,7 @@ from pathlib import Path
 import urllib.request
 import zipfile
 
-from ..core.artifact import ZIP_ERRORS
+from ..core.archive import ZIP_ERRORS
 from ..core.atomic import atomic_write
 
 UCI_URL = 'https://archive.ics.uci.edu/static/public/310/ujiindoorloc.zip'
