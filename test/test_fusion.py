@@ -489,16 +489,19 @@ def test_fit_odometry_finds_the_drift():
                      truth[at, 3])
 
 
-def turning(n=3000, drift=math.radians(1.4), turn_at=(100.0, 130.0)):
+def turning(n=3000, drift=math.radians(1.4), turn_at=(100.0, 130.0),
+            rate=None):
     """
     Return (truth, odometry) of a drive at 0.5 m/s, 10 Hz, that turns.
 
-    The truth turns 270 degrees between ``turn_at`` seconds; the odometry
-    starts at 0, 0 with another heading and loses ``drift`` rad per metre.
+    The truth turns 270 degrees between ``turn_at`` seconds (or at ``rate``
+    rad/s, one per row); the odometry starts at 0, 0 with another heading
+    and loses ``drift`` rad per metre.
     """
     t = np.arange(n) * 0.1
-    rate = np.where((t > turn_at[0]) & (t <= turn_at[1]),
-                    1.5 * math.pi / (turn_at[1] - turn_at[0]), 0.0)
+    if rate is None:
+        rate = np.where((t > turn_at[0]) & (t <= turn_at[1]),
+                        1.5 * math.pi / (turn_at[1] - turn_at[0]), 0.0)
     yaw = np.cumsum(rate * 0.1)
     odo_yaw = yaw + 0.3 - drift * 0.05 * np.arange(n)
 
@@ -509,6 +512,36 @@ def turning(n=3000, drift=math.radians(1.4), turn_at=(100.0, 130.0)):
     odo = np.column_stack([t, path(np.cos(odo_yaw)), path(np.sin(odo_yaw)),
                            wrap(odo_yaw)])
     return truth, odo
+
+
+def test_fit_odometry_follows_a_spin_between_slow_scans():
+    # a turn of 270 degrees in 3 s, with a scan every 3 s: the true yaw
+    # alone cannot tell a spin of 4.7 rad from one of -1.6 rad
+    truth, odo = turning(turn_at=(100.0, 103.0))
+    at = np.arange(5, len(truth), 30)
+    report = fit_odometry(odo, truth[at, 0], truth[at, 1:3], truth[at, 3])[1]
+    assert report['drift_deg_per_m'] == pytest.approx(1.4, abs=0.05)
+
+
+def test_fit_odometry_refuses_a_yaw_not_in_radians():
+    # weaving left and right, back to the start heading, with a small
+    # drift: in degrees, the net turn looks like a drift of 17 deg per m
+    t = np.arange(2400) * 0.1
+    truth, odo = turning(n=2400, drift=math.radians(0.3),
+                         rate=0.3 * np.sin(2 * math.pi * t / 40))
+    at = np.arange(0, len(truth), 10)
+    fitted = fit_odometry(odo, truth[at, 0], truth[at, 1:3], truth[at, 3])
+    assert fitted[1]['drift_deg_per_m'] == pytest.approx(0.3, abs=0.05)
+    degrees = odo.copy()
+    degrees[:, 3] = np.degrees(odo[:, 3])
+    with pytest.raises(FitError, match=r'^odometry: where it turns 0.2 rad '
+                                       r'or more between two scans of the '
+                                       r'scans \(\d+ times\), the true turn '
+                                       r'differs from it by [\d.]+ deg '
+                                       r'\(median\): not this run.s '
+                                       r'odometry, or a yaw not in radians'):
+        fit_odometry(degrees, truth[at, 0], truth[at, 1:3], truth[at, 3],
+                     names=('the scans', 'odometry'))
 
 
 def test_fit_odometry_leaves_out_the_stretches_across_an_odometry_gap():

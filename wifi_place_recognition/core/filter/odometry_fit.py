@@ -10,7 +10,10 @@ metre); :func:`fit_odometry` returns :class:`.particles.FusionParams` with
 that drift as the filter's prior, and a report of what it measured.
 A stretch across a gap in the odometry longer than the node's default
 ``odom_timeout`` (the node does not bridge such a gap either) is left out
-and counted: the odometry's turn over the gap is unknown.
+and counted: the odometry's turn over the gap is unknown. Between two scans
+the true turn is taken as the odometry's plus the wrapped difference of the
+two, so that a robot spinning more than half a turn between slow scans
+adds no whole turn of error; the two must agree where the robot turns.
 """
 
 from dataclasses import replace
@@ -18,6 +21,7 @@ import math
 
 import numpy as np
 
+from .angles import wrap
 from .fusion import FusionLimits
 from .particles import FusionParams
 from .trajectory import inside_span, time_span
@@ -32,6 +36,11 @@ MAX_GAP_S = FusionLimits().odom_timeout
 #: The odometry's distance over the true one, and its drift (rad per m),
 #: beyond which it is not this run's odometry in metres and radians.
 DISTANCE_RATIO, MAX_DRIFT = (0.5, 2.0), 0.5
+#: Between scans where the odometry turns at least ``TURNING`` rad (and at
+#: least ``MIN_TURNS`` such), the median of how far the true turn differs
+#: from it (rad, wrapped) beyond which the two headings are not the same
+#: run's in radians (degrees on either side turn 57 times as far).
+TURNING, MIN_TURNS, MAX_TURN_MISMATCH = 0.2, 3, 0.5
 
 
 class FitError(ValueError):
@@ -81,10 +90,10 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
     odo_yaw = np.interp(stamps, t, np.unwrap(odometry[:, 3]))
     odo_xy = np.column_stack([np.interp(stamps, t, odometry[:, 1]),
                               np.interp(stamps, t, odometry[:, 2])])
-    true_yaw = np.unwrap(yaw)
     steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
     travelled = np.concatenate([[0.0], np.cumsum(steps)])
     across_gap = across(stamps[:-1], stamps[1:])
+    true_yaw = _true_yaw(yaw, odo_yaw, across_gap, run, odometry_name)
     odo_steps = np.linalg.norm(np.diff(odo_xy, axis=0), axis=1)
     edges = [0]
     for i in range(1, len(stamps)):
@@ -135,3 +144,27 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
               'window_drift_deg_per_m_sd': math.degrees(
                   float(rates.std(ddof=1)))}
     return fitted, report
+
+
+def _true_yaw(yaw, odo_yaw, across_gap, run, odometry_name):
+    """
+    Return the true yaw unwrapped along the odometry's turn between scans.
+
+    Raises :class:`FitError` when, where the odometry turns, the true turn
+    is mostly more than :data:`MAX_TURN_MISMATCH` from it.
+    """
+    turn, odo_turn = np.diff(yaw), np.diff(odo_yaw)
+    mismatch = wrap(turn - odo_turn)
+    turning = ~across_gap & (np.abs(odo_turn) >= TURNING)
+    if turning.sum() >= MIN_TURNS:
+        apart = float(np.median(np.abs(mismatch[turning])))
+        if apart > MAX_TURN_MISMATCH:
+            raise FitError(
+                f'{odometry_name}: where it turns {TURNING:g} rad or more '
+                f'between two scans of {run} ({int(turning.sum())} times), '
+                f'the true turn differs from it by {math.degrees(apart):.3g} '
+                f'deg (median): not this run\'s odometry, or a yaw not in '
+                f'radians (fitting needs at most '
+                f'{math.degrees(MAX_TURN_MISMATCH):.3g})')
+    steps = np.where(across_gap, wrap(turn), odo_turn + mismatch)
+    return np.concatenate([yaw[:1], yaw[:1] + np.cumsum(steps)])
