@@ -299,6 +299,27 @@ def test_a_references_only_update_fills_the_hole(site, tmp_path, torch):
     assert len(model.position.xy) == 300 + 300
 
 
+def test_scans_a_references_only_update_cannot_use_are_named(site,
+                                                             tmp_path):
+    lines = (site / 'recorded.csv').read_text().splitlines(True)
+    assert lines[0].startswith('BUILDINGID,FLOOR,')
+    moved = tmp_path / 'moved.csv'      # 20 scans of a floor not surveyed
+    moved.write_text(lines[0] + ''.join(
+        '0,2,' + line.split(',', 2)[2] if k < 20 else line
+        for k, line in enumerate(lines[1:])))
+    models = tmp_path / 'models'
+    models.mkdir()
+    result = _references_only(site, models, '--model', site / 'in_use.npz',
+                              '--recorded', moved)
+    assert result.returncode == 0, result.stderr
+    assert f'note: {moved}: 20 of 300 scans left out of the position ' \
+        f'references: 20 of a building/floor the model does not know ' \
+        f'(B0F2: 20) (a full update learns new floors and APs)\n' in \
+        result.stderr, result.stderr
+    assert _report(models, _history(models)[1])['put_in_use']['references'][
+        'recorded']['left_out']['unknown_place'] == {'B0F2': 20}
+
+
 def test_a_failed_rebuild_puts_the_checked_candidate_in_use(
         site, tmp_path, monkeypatch, capsys):
     built = []

@@ -280,6 +280,7 @@ def _update(args, store):
     if ok:      # the same recipe, the held-out scans learned too
         final, final_built = _rebuilt(build, recorded, in_use, candidate,
                                       built)
+    _left_out_notes(final_built or built)
     used = resource.getrusage(resource.RUSAGE_SELF)
     report = {
         'decision': 'put in use' if ok else 'refused', 'reason': reason,
@@ -442,6 +443,24 @@ def _referenced(in_use, path, survey, learned):
             'from': str(path), 'survey': parts[0], 'recorded': parts[1],
             'aps': len(candidate.ap_ids),
             'seconds': round(time.monotonic() - start, 1)}}
+
+
+def _left_out_notes(built):
+    """Print a note for each part of a references update with scans left out."""
+    for part in built.get('references', {}).values():
+        if not isinstance(part, dict):
+            continue
+        places, silent = part['left_out']['unknown_place'], \
+            part['left_out']['no_known_ap']
+        why = ([f'{sum(places.values())} of a building/floor the model does '
+                f'not know ({", ".join(f"{k}: {n}" for k, n in places.items())}'
+                f')'] if places else []) + \
+            ([f'{silent} hearing none of its APs'] if silent else [])
+        if why:
+            print(f'note: {part["source"]}: {part["scans"] - part["used"]} of '
+                  f'{part["scans"]} scans left out of the position references:'
+                  f' {"; ".join(why)} (a full update learns new floors and '
+                  f'APs)', file=sys.stderr)
 
 
 def _line(figures):
