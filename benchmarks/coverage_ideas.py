@@ -47,6 +47,15 @@ seeds ``--seeds`` (default 0), the fitted odometry.
   mean square residual (at least ``TRACK_HEADING_LEAST_M``) over the
   track's root mean square radius, over the outlier floor), always or
   only while the particles' heading is not known.
+- **How soon a hole must be known** (round 23): told the holes
+  ``LATE_SCANS`` scans late, entering and leaving (what a detector
+  averaged over the last scans could at best do).
+- **The loudness as a weight** (round 23): a scan's loudness excess (the
+  most by which it hears an AP louder than the loudest reading of it
+  among the references its class searches, ``circle_ideas.excess``),
+  averaged over the last ``LOUD_SCANS`` scans; the scan counts 1 below
+  ``lo`` dB, 0 above ``hi``, linearly between (``coverage_full`` 1), for
+  each (lo, hi) of ``LOUD_RAMPS``.
 
 Table on stdout, JSON in ``benchmarks/results/coverage-ideas.json``.
 
@@ -67,6 +76,7 @@ from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.coverage import (
     COVERED_M, EDGE_RADIUS_M, one_sidedness, PAIRS_PER_STEP)
+from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.filter.angles import wrap
 from wifi_place_recognition.core.filter.fusion import Fusion, relative
 from wifi_place_recognition.core.filter.particles import UNKNOWN_VARIANCE
@@ -77,6 +87,7 @@ from wifi_place_recognition.core.filter.trajectory import fuse_offline, score
 from wifi_place_recognition.training.coverage import auc
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from circle_ideas import excesses  # noqa: E402  (the loudness excess)
 import fusion as fb  # noqa: E402  (the fusion benchmark's protocol)
 
 #: The mean resultant length of the particles' headings from which the
@@ -92,6 +103,10 @@ TOLD_HEADING_SD = 0.1
 #: The heading from the scans' track: its width is this many times the
 #: fit's residual (at least the least, m) over the track's radius.
 TRACK_HEADING_K, TRACK_HEADING_LEAST_M = 1.0, 2.0
+#: The holes told this many scans late.
+LATE_SCANS = (5, 10)
+#: The loudness weight: scans averaged, and (lo, hi) dB of its ramp.
+LOUD_SCANS, LOUD_RAMPS = 10, ((2.0, 5.0), (3.0, 6.0), (5.0, 8.0))
 
 
 def nearest_covered(xy, survey_xy, reach=COVERED_M):
@@ -271,15 +286,42 @@ class TrackHeadingFusion(Fusion):
         super()._replay()
 
 
+def late(hole, scans):
+    """Return the holes known ``scans`` scans late (a mask)."""
+    out = np.zeros_like(hole)
+    out[scans:] = hole[:len(hole) - scans]
+    return out
+
+
+def recent_mean(values, scans):
+    """Return each value averaged with those before it (``scans`` in all)."""
+    out = np.full(len(values), np.nan)
+    for i in range(len(values)):
+        window = values[max(0, i - scans + 1):i + 1]
+        window = window[np.isfinite(window)]
+        if len(window):
+            out[i] = window.mean()
+    return out
+
+
+def loudness(model, test):
+    """Return each test scan's loudness excess (dB; NaN: no AP shared)."""
+    rssi = align(model, test.fp)
+    proba = model.predict_positions(rssi)[0]
+    x = excesses(model.position, rssi, proba.argmax(axis=1))
+    return np.where(np.isfinite(x), x, np.nan)
+
+
 def survey_positions(model):
     """Return every reference position of a model (m, map frame)."""
     return np.concatenate([model.position.map_xy(c)
                            for c in range(len(model.classes))])
 
 
-def filters(fitted, single, side, hole, survey_xy, test):
+def filters(fitted, single, side, hole, survey_xy, test, loud):
     """Return {name: (params, scans' coverage, fusion factory)}."""
     weighed = replace(fitted.fusion, coverage_full=0.5)
+    loud = np.nan_to_num(recent_mean(loud, LOUD_SCANS), nan=-np.inf)
 
     def sensor(kind):
         return lambda p, seed: Fusion(p, seed=seed,
@@ -307,7 +349,14 @@ def filters(fitted, single, side, hole, survey_xy, test):
         'told both': (
             weighed, np.where(hole, 0.0, 1.0),
             lambda p, seed: HeadingToldFusion(p, seed, test.stamps,
-                                              test.yaw))}
+                                              test.yaw)),
+        **{f'told the holes {k} scans late': (
+            weighed, np.where(late(hole, k), 0.0, 1.0), None)
+           for k in LATE_SCANS},
+        **{f'weighed by loudness, {lo:g}-{hi:g} dB': (
+            replace(fitted.fusion, coverage_full=1.0),
+            np.clip((hi - loud) / (hi - lo), 0.0, 1.0), None)
+           for lo, hi in LOUD_RAMPS}}
 
 
 def pair(trained, test, seeds):
@@ -329,7 +378,8 @@ def pair(trained, test, seeds):
     alone = fb.single_figures(test, single, hole)['mean_m']
     out['filters'] = {}
     for name, (params, coverage, fusion) in filters(
-            fitted, single, side, hole, survey_xy, test).items():
+            fitted, single, side, hole, survey_xy, test,
+            loudness(plain, test)).items():
         runs = []
         for seed in seeds:
             xy, yaw, cov = fuse_offline(
@@ -400,7 +450,8 @@ def main():
     results = {}
     print(f'{"test <- survey":28s} hole  AUC: P  side  fused / single: '
           f'default, weighed, edge, belief, told, axis, heading, track, '
-          f'track while unknown, both')
+          f'track while unknown, both, told {LATE_SCANS[0]} and '
+          f'{LATE_SCANS[1]} scans late, loudness {LOUD_RAMPS}')
     with tempfile.TemporaryDirectory() as folder:
         for site, runs in fb.site_runs(args.data, folder):
             for holes in (False, True):
