@@ -542,6 +542,11 @@ def test_fit_odometry_refuses_a_yaw_not_in_radians():
                                        r'odometry, or a yaw not in radians'):
         fit_odometry(degrees, truth[at, 0], truth[at, 1:3], truth[at, 3],
                      names=('the scans', 'odometry'))
+    mirrored = odo.copy()           # clockwise yaw
+    mirrored[:, 3] = -odo[:, 3]
+    with pytest.raises(FitError, match=r'deg \(median\): its yaw turns '
+                                       r'clockwise \(REP 103'):
+        fit_odometry(mirrored, truth[at, 0], truth[at, 1:3], truth[at, 3])
 
 
 def test_fit_odometry_leaves_out_the_stretches_across_an_odometry_gap():

@@ -158,13 +158,16 @@ def _true_yaw(yaw, odo_yaw, across_gap, run, odometry_name):
     turning = ~across_gap & (np.abs(odo_turn) >= TURNING)
     if turning.sum() >= MIN_TURNS:
         apart = float(np.median(np.abs(mismatch[turning])))
+        mirrored = float(np.median(np.abs(wrap(turn + odo_turn)[turning])))
         if apart > MAX_TURN_MISMATCH:
+            why = 'its yaw turns clockwise (REP 103: counter-clockwise is ' \
+                'positive)' if mirrored <= MAX_TURN_MISMATCH else \
+                'not this run\'s odometry, or a yaw not in radians'
             raise FitError(
                 f'{odometry_name}: where it turns {TURNING:g} rad or more '
                 f'between two scans of {run} ({int(turning.sum())} times), '
                 f'the true turn differs from it by {math.degrees(apart):.3g} '
-                f'deg (median): not this run\'s odometry, or a yaw not in '
-                f'radians (fitting needs at most '
+                f'deg (median): {why} (fitting needs at most '
                 f'{math.degrees(MAX_TURN_MISMATCH):.3g})')
     steps = np.where(across_gap, wrap(turn), odo_turn + mismatch)
     return np.concatenate([yaw[:1], yaw[:1] + np.cumsum(steps)])
