@@ -11,9 +11,9 @@ that drift as the filter's prior, and a report of what it measured.
 A stretch across a gap in the odometry longer than the node's default
 ``odom_timeout`` (the node does not bridge such a gap either) is left out
 and counted: the odometry's turn over the gap is unknown. Between two scans
-the true turn is taken as the odometry's plus the wrapped difference of the
-two, so that a robot spinning more than half a turn between slow scans
-adds no whole turn of error; the two must agree where the robot turns.
+the true turn gains the whole turns that bring it nearest the odometry's,
+so that a robot spinning more than half a turn between slow scans adds no
+whole turn of error; the two must agree where the robot turns.
 """
 
 from dataclasses import replace
@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from .angles import wrap
+from .angles import TWO_PI, wrap
 from .fusion import FusionLimits
 from .particles import FusionParams
 from .trajectory import inside_span, time_span
@@ -148,12 +148,15 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
 
 def _true_yaw(yaw, odo_yaw, across_gap, run, odometry_name):
     """
-    Return the true yaw unwrapped along the odometry's turn between scans.
+    Return the true yaw unwrapped, whole turns added as the odometry says.
 
-    Raises :class:`FitError` when, where the odometry turns, the true turn
-    is mostly more than :data:`MAX_TURN_MISMATCH` from it.
+    Between two scans (not across an odometry gap) the true turn gains
+    the whole turns that bring it nearest the odometry's. Raises
+    :class:`FitError` when, where the odometry turns, the true turn is
+    mostly more than :data:`MAX_TURN_MISMATCH` from it.
     """
-    turn, odo_turn = np.diff(yaw), np.diff(odo_yaw)
+    true_yaw = np.unwrap(yaw)
+    turn, odo_turn = np.diff(true_yaw), np.diff(odo_yaw)
     mismatch = wrap(turn - odo_turn)
     turning = ~across_gap & (np.abs(odo_turn) >= TURNING)
     if turning.sum() >= MIN_TURNS:
@@ -169,5 +172,5 @@ def _true_yaw(yaw, odo_yaw, across_gap, run, odometry_name):
                 f'the true turn differs from it by {math.degrees(apart):.3g} '
                 f'deg (median): {why} (fitting needs at most '
                 f'{math.degrees(MAX_TURN_MISMATCH):.3g})')
-    steps = np.where(across_gap, wrap(turn), odo_turn + mismatch)
-    return np.concatenate([yaw[:1], yaw[:1] + np.cumsum(steps)])
+    turns = np.where(across_gap, 0.0, np.round((odo_turn - turn) / TWO_PI))
+    return true_yaw + TWO_PI * np.concatenate([[0.0], np.cumsum(turns)])
