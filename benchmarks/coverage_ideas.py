@@ -55,7 +55,8 @@ seeds ``--seeds`` (default 0), the fitted odometry.
   among the references its class searches, ``circle_ideas.excess``),
   averaged over the last ``LOUD_SCANS`` scans; the scan counts 1 below
   ``lo`` dB, 0 above ``hi``, linearly between (``coverage_full`` 1), for
-  each (lo, hi) of ``LOUD_RAMPS``.
+  each (lo, hi) of ``LOUD_RAMPS``; a scan that hears no AP the
+  references heard counts fully.
 
 Table on stdout, JSON in ``benchmarks/results/coverage-ideas.json``.
 
@@ -287,9 +288,9 @@ class TrackHeadingFusion(Fusion):
 
 
 def late(hole, scans):
-    """Return the holes known ``scans`` scans late (a mask)."""
+    """Return a mask: the holes as known ``scans`` scans after each."""
     out = np.zeros_like(hole)
-    out[scans:] = hole[:len(hole) - scans]
+    out[scans:] = hole[:max(len(hole) - scans, 0)]
     return out
 
 
@@ -451,7 +452,8 @@ def main():
     print(f'{"test <- survey":28s} hole  AUC: P  side  fused / single: '
           f'default, weighed, edge, belief, told, axis, heading, track, '
           f'track while unknown, both, told {LATE_SCANS[0]} and '
-          f'{LATE_SCANS[1]} scans late, loudness {LOUD_RAMPS}')
+          f'{LATE_SCANS[1]} scans late, loudness ' + ', '.join(
+              f'{lo:g}-{hi:g} dB' for lo, hi in LOUD_RAMPS))
     with tempfile.TemporaryDirectory() as folder:
         for site, runs in fb.site_runs(args.data, folder):
             for holes in (False, True):

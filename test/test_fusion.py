@@ -544,9 +544,22 @@ def test_fit_odometry_refuses_a_yaw_not_in_radians():
                      names=('the scans', 'odometry'))
     mirrored = odo.copy()           # clockwise yaw
     mirrored[:, 3] = -odo[:, 3]
-    with pytest.raises(FitError, match=r'deg \(median\): its yaw turns '
-                                       r'clockwise \(REP 103'):
+    with pytest.raises(FitError, match=r'deg \(median\): the two turn '
+                                       r'opposite ways \(one yaw is '
+                                       r'clockwise; REP 103'):
         fit_odometry(mirrored, truth[at, 0], truth[at, 1:3], truth[at, 3])
+
+
+def test_fit_odometry_does_not_judge_turns_across_an_odometry_gap():
+    # the odometry lost for 5 s while the robot turns 270 degrees in 3 s:
+    # across the gap its turn is interpolated, unlike the truth's
+    truth, odo = turning(turn_at=(100.0, 103.0))
+    at = np.arange(0, len(truth), 10)
+    lost = odo[(odo[:, 0] < 99.0) | (odo[:, 0] > 104.0)]
+    report = fit_odometry(lost, truth[at, 0], truth[at, 1:3],
+                          truth[at, 3])[1]
+    assert report['drift_deg_per_m'] == pytest.approx(1.4, abs=0.05)
+    assert report['windows_across_odometry_gaps'] == 2
 
 
 def test_fit_odometry_leaves_out_the_stretches_across_an_odometry_gap():

@@ -312,10 +312,10 @@ def test_scans_a_references_only_update_cannot_use_are_named(site,
     result = _references_only(site, models, '--model', site / 'in_use.npz',
                               '--recorded', moved)
     assert result.returncode == 0, result.stderr
-    assert f'note: {moved}: 20 of 300 scans left out of the position ' \
-        f'references: 20 of a building/floor the model does not know ' \
-        f'(B0F2: 20) (a full update learns new floors and APs)\n' in \
-        result.stderr, result.stderr
+    assert f'note: {moved}: 20 of the 300 scans built from left out of ' \
+        f'the position references: 20 of a building/floor the model does ' \
+        f'not know (B0F2: 20) (a full update learns new floors and APs)\n' \
+        in result.stderr, result.stderr
     assert _report(models, _history(models)[1])['put_in_use']['references'][
         'recorded']['left_out']['unknown_place'] == {'B0F2': 20}
 

@@ -446,21 +446,21 @@ def _referenced(in_use, path, survey, learned):
 
 
 def _left_out_notes(built):
-    """Print a note for each part of a references update with scans left out."""
+    """Print a note per part of a references update with scans left out."""
     for part in built.get('references', {}).values():
         if not isinstance(part, dict):
             continue
-        places, silent = part['left_out']['unknown_place'], \
-            part['left_out']['no_known_ap']
+        places = part['left_out']['unknown_place']
+        silent = part['left_out']['no_known_ap']
+        named = ', '.join(f'{k}: {n}' for k, n in places.items())
         why = ([f'{sum(places.values())} of a building/floor the model does '
-                f'not know ({", ".join(f"{k}: {n}" for k, n in places.items())}'
-                f')'] if places else []) + \
-            ([f'{silent} hearing none of its APs'] if silent else [])
+                f'not know ({named})'] if places else []) + \
+            ([f'{silent} hearing none of the model\'s APs'] if silent else [])
         if why:
             print(f'note: {part["source"]}: {part["scans"] - part["used"]} of '
-                  f'{part["scans"]} scans left out of the position references:'
-                  f' {"; ".join(why)} (a full update learns new floors and '
-                  f'APs)', file=sys.stderr)
+                  f'the {part["scans"]} scans built from left out of the '
+                  f'position references: {"; ".join(why)} (a full update '
+                  f'learns new floors and APs)', file=sys.stderr)
 
 
 def _line(figures):

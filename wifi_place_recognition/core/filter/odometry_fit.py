@@ -13,7 +13,7 @@ A stretch across a gap in the odometry longer than the node's default
 and counted: the odometry's turn over the gap is unknown. Between two scans
 the true turn gains the whole turns that bring it nearest the odometry's,
 so that a robot spinning more than half a turn between slow scans adds no
-whole turn of error; the two must agree where the robot turns.
+whole turn of error; the two must agree where the odometry turns fast.
 """
 
 from dataclasses import replace
@@ -36,10 +36,12 @@ MAX_GAP_S = FusionLimits().odom_timeout
 #: The odometry's distance over the true one, and its drift (rad per m),
 #: beyond which it is not this run's odometry in metres and radians.
 DISTANCE_RATIO, MAX_DRIFT = (0.5, 2.0), 0.5
-#: Between scans where the odometry turns at least ``TURNING`` rad (and at
-#: least ``MIN_TURNS`` such), the median of how far the true turn differs
-#: from it (rad, wrapped) beyond which the two headings are not the same
-#: run's in radians (degrees on either side turn 57 times as far).
+#: Over the intervals between scans in which the odometry turns at least
+#: ``TURNING`` rad (when there are ``MIN_TURNS`` or more), the median of
+#: how far the true turn differs from it (rad, wrapped) beyond which the
+#: two headings are not the same run's in radians (degrees turn 57 times
+#: as far). A robot that never turns that fast between scans is not
+#: checked so (the drift limit still is).
 TURNING, MIN_TURNS, MAX_TURN_MISMATCH = 0.2, 3, 0.5
 
 
@@ -59,7 +61,9 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
     ``drift_mean`` becomes the total true-minus-odometry turn over the
     distance driven in the stretches that span no odometry gap longer
     than :data:`MAX_GAP_S`, ``drift_sd`` its standard error over them (at
-    least :data:`MIN_DRIFT_SD`).
+    least :data:`MIN_DRIFT_SD`). Raises :class:`FitError` naming what is
+    wrong: too few stretches, or odometry unlike the run's truth (its
+    distance, drift or turns between scans).
     """
     params = params or FusionParams()
     run, odometry_name = names
@@ -150,10 +154,12 @@ def _true_yaw(yaw, odo_yaw, across_gap, run, odometry_name):
     """
     Return the true yaw unwrapped, whole turns added as the odometry says.
 
-    Between two scans (not across an odometry gap) the true turn gains
-    the whole turns that bring it nearest the odometry's. Raises
-    :class:`FitError` when, where the odometry turns, the true turn is
-    mostly more than :data:`MAX_TURN_MISMATCH` from it.
+    Between two scans the true turn gains the whole turns that bring it
+    nearest the odometry's (across an odometry gap that only shifts the
+    yaw after it, and no stretch spans one). Raises :class:`FitError`
+    when, in the :data:`MIN_TURNS` or more intervals not across a gap in
+    which the odometry turns :data:`TURNING` rad or more, the true turn
+    is mostly more than :data:`MAX_TURN_MISMATCH` from it.
     """
     true_yaw = np.unwrap(yaw)
     turn, odo_turn = np.diff(true_yaw), np.diff(odo_yaw)
@@ -163,8 +169,9 @@ def _true_yaw(yaw, odo_yaw, across_gap, run, odometry_name):
         apart = float(np.median(np.abs(mismatch[turning])))
         mirrored = float(np.median(np.abs(wrap(turn + odo_turn)[turning])))
         if apart > MAX_TURN_MISMATCH:
-            why = 'its yaw turns clockwise (REP 103: counter-clockwise is ' \
-                'positive)' if mirrored <= MAX_TURN_MISMATCH else \
+            why = 'the two turn opposite ways (one yaw is clockwise; REP ' \
+                '103: counter-clockwise is positive)' \
+                if mirrored <= MAX_TURN_MISMATCH else \
                 'not this run\'s odometry, or a yaw not in radians'
             raise FitError(
                 f'{odometry_name}: where it turns {TURNING:g} rad or more '
@@ -172,5 +179,5 @@ def _true_yaw(yaw, odo_yaw, across_gap, run, odometry_name):
                 f'the true turn differs from it by {math.degrees(apart):.3g} '
                 f'deg (median): {why} (fitting needs at most '
                 f'{math.degrees(MAX_TURN_MISMATCH):.3g})')
-    turns = np.where(across_gap, 0.0, np.round((odo_turn - turn) / TWO_PI))
+    turns = np.round((odo_turn - turn) / TWO_PI)
     return true_yaw + TWO_PI * np.concatenate([[0.0], np.cumsum(turns)])
