@@ -103,8 +103,10 @@ def test_fit_odometry_refuses_odometry_unlike_the_run(tmp_path,
     scans, _, odo = run_files(tmp_path)
     still = odo.copy()
     still[:, 1:] = 0.0                      # a robot that never moved
+    driven = np.concatenate([[0.0], np.cumsum(np.hypot(
+        *np.diff(odo[:, 1:3], axis=0).T))])
     spinning = odo.copy()
-    spinning[:, 3] += odo[:, 1]             # turning 1 rad per m more
+    spinning[:, 3] += driven                # turning 1 rad per m more
     for rows, message in (
             (still, 'the odometry drove 0 times the true distance'),
             (spinning, 'its heading turns unlike the truth of')):
@@ -119,7 +121,7 @@ def test_fit_odometry_refuses_odometry_unlike_the_run(tmp_path,
     short = odo.copy()
     short[:, 1:3] *= 0.6                    # wheels 40 % short
     turning = odo.copy()
-    turning[:, 3] += 0.4 * odo[:, 1]        # 0.4 rad per m
+    turning[:, 3] += 0.4 * driven           # 0.4 rad per m
     for rows in (short, turning):
         odom = write_odometry(tmp_path / 'odom-ok.csv', rows)
         result = run(python_module(

@@ -524,22 +524,25 @@ def test_fit_odometry_follows_a_spin_between_slow_scans():
 
 
 def test_fit_odometry_refuses_a_yaw_not_in_radians():
-    # weaving left and right, back to the start heading, with a small
-    # drift: in degrees, the net turn looks like a drift of 17 deg per m
+    # weaving gently left and right (under 0.2 rad between two scans),
+    # back to the start heading, with a small drift: in degrees, the net
+    # turn looks like a drift of 17 deg per m; mirrored, like none
     t = np.arange(2400) * 0.1
     truth, odo = turning(n=2400, drift=math.radians(0.3),
-                         rate=0.3 * np.sin(2 * math.pi * t / 40))
+                         rate=0.15 * np.sin(2 * math.pi * t / 40))
     at = np.arange(0, len(truth), 10)
     fitted = fit_odometry(odo, truth[at, 0], truth[at, 1:3], truth[at, 3])
     assert fitted[1]['drift_deg_per_m'] == pytest.approx(0.3, abs=0.05)
     degrees = odo.copy()
     degrees[:, 3] = np.degrees(odo[:, 3])
-    with pytest.raises(FitError, match=r'^odometry: where it turns 0.2 rad '
-                                       r'or more between two scans of the '
-                                       r'scans \(\d+ times\), the true turn '
-                                       r'differs from it by [\d.]+ deg '
-                                       r'\(median\): not this run.s '
-                                       r'odometry, or a yaw not in radians'):
+    with pytest.raises(FitError, match=r'^odometry: in the \d+ stretches '
+                                       r'of 3 m of the scans in which it or '
+                                       r'the truth turns 0.2 rad or more, '
+                                       r'its turn \(the fitted drift added '
+                                       r'back\) differs from the true one by '
+                                       r'[\d.]+ deg \(median\): not this '
+                                       r'run.s odometry, or a yaw not in '
+                                       r'radians'):
         fit_odometry(degrees, truth[at, 0], truth[at, 1:3], truth[at, 3],
                      names=('the scans', 'odometry'))
     mirrored = odo.copy()           # clockwise yaw

@@ -13,7 +13,8 @@ A stretch across a gap in the odometry longer than the node's default
 and counted: the odometry's turn over the gap is unknown. Between two scans
 the true turn gains the whole turns that bring it nearest the odometry's,
 so that a robot spinning more than half a turn between slow scans adds no
-whole turn of error; the two must agree where the odometry turns fast.
+whole turn of error. Over the stretches in which either turns, the two
+turns must agree once the fitted drift is added back.
 """
 
 from dataclasses import replace
@@ -36,12 +37,11 @@ MAX_GAP_S = FusionLimits().odom_timeout
 #: The odometry's distance over the true one, and its drift (rad per m),
 #: beyond which it is not this run's odometry in metres and radians.
 DISTANCE_RATIO, MAX_DRIFT = (0.5, 2.0), 0.5
-#: Over the intervals between scans in which the odometry turns at least
+#: Over the stretches in which the odometry or the truth turns at least
 #: ``TURNING`` rad (when there are ``MIN_TURNS`` or more), the median of
-#: how far the true turn differs from it (rad, wrapped) beyond which the
-#: two headings are not the same run's in radians (degrees turn 57 times
-#: as far). A robot that never turns that fast between scans is not
-#: checked so (the drift limit still is).
+#: how far the odometry's turn, the fitted drift added back, differs from
+#: the true one (rad, wrapped) beyond which the two headings are not the
+#: same run's in radians (degrees turn 57 times as far).
 TURNING, MIN_TURNS, MAX_TURN_MISMATCH = 0.2, 3, 0.5
 
 
@@ -97,7 +97,7 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
     steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
     travelled = np.concatenate([[0.0], np.cumsum(steps)])
     across_gap = across(stamps[:-1], stamps[1:])
-    true_yaw = _true_yaw(yaw, odo_yaw, across_gap, run, odometry_name)
+    true_yaw = _true_yaw(yaw, odo_yaw)
     odo_steps = np.linalg.norm(np.diff(odo_xy, axis=0), axis=1)
     edges = [0]
     for i in range(1, len(stamps)):
@@ -115,7 +115,8 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
                        f'stretches of {window_m:g} m')
     a, b = a[kept], b[kept]
     distance = travelled[b] - travelled[a]
-    turn_error = (true_yaw[b] - true_yaw[a]) - (odo_yaw[b] - odo_yaw[a])
+    true_turn, odo_turn = true_yaw[b] - true_yaw[a], odo_yaw[b] - odo_yaw[a]
+    turn_error = true_turn - odo_turn
     rates = turn_error / distance
     drift = float(turn_error.sum() / distance.sum())
     ratio = float(odo_steps[~across_gap].sum() / steps[~across_gap].sum())
@@ -125,6 +126,8 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
                        f'this run\'s odometry, or not in metres (fitting '
                        f'needs {DISTANCE_RATIO[0]:g} to '
                        f'{DISTANCE_RATIO[1]:g})')
+    _check_turns(true_turn, odo_turn, drift * distance, window_m, run,
+                 odometry_name)
     if abs(drift) > MAX_DRIFT:
         raise FitError(f'{odometry_name}: its heading turns unlike the '
                        f'truth of {run} by {math.degrees(drift):.3g} deg '
@@ -150,34 +153,41 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
     return fitted, report
 
 
-def _true_yaw(yaw, odo_yaw, across_gap, run, odometry_name):
+def _true_yaw(yaw, odo_yaw):
     """
     Return the true yaw unwrapped, whole turns added as the odometry says.
 
     Between two scans the true turn gains the whole turns that bring it
     nearest the odometry's (across an odometry gap that only shifts the
-    yaw after it, and no stretch spans one). Raises :class:`FitError`
-    when, in the :data:`MIN_TURNS` or more intervals not across a gap in
-    which the odometry turns :data:`TURNING` rad or more, the true turn
-    is mostly more than :data:`MAX_TURN_MISMATCH` from it.
+    yaw after it: no stretch spans one).
     """
     true_yaw = np.unwrap(yaw)
-    turn, odo_turn = np.diff(true_yaw), np.diff(odo_yaw)
-    mismatch = wrap(turn - odo_turn)
-    turning = ~across_gap & (np.abs(odo_turn) >= TURNING)
-    if turning.sum() >= MIN_TURNS:
-        apart = float(np.median(np.abs(mismatch[turning])))
-        mirrored = float(np.median(np.abs(wrap(turn + odo_turn)[turning])))
-        if apart > MAX_TURN_MISMATCH:
-            why = 'the two turn opposite ways (one yaw is clockwise; REP ' \
-                '103: counter-clockwise is positive)' \
-                if mirrored <= MAX_TURN_MISMATCH else \
-                'not this run\'s odometry, or a yaw not in radians'
-            raise FitError(
-                f'{odometry_name}: where it turns {TURNING:g} rad or more '
-                f'between two scans of {run} ({int(turning.sum())} times), '
-                f'the true turn differs from it by {math.degrees(apart):.3g} '
-                f'deg (median): {why} (fitting needs at most '
-                f'{math.degrees(MAX_TURN_MISMATCH):.3g})')
-    turns = np.round((odo_turn - turn) / TWO_PI)
+    turns = np.round((np.diff(odo_yaw) - np.diff(true_yaw)) / TWO_PI)
     return true_yaw + TWO_PI * np.concatenate([[0.0], np.cumsum(turns)])
+
+
+def _check_turns(true_turn, odo_turn, drifted, window_m, run, odometry_name):
+    """
+    Refuse odometry whose stretches turn unlike the truth's.
+
+    ``drifted``: each stretch's turn the fitted drift explains. Raises
+    :class:`FitError` as :data:`MAX_TURN_MISMATCH` says.
+    """
+    turning = np.maximum(np.abs(true_turn), np.abs(odo_turn)) >= TURNING
+    if turning.sum() < MIN_TURNS:
+        return
+    apart = float(np.median(np.abs(wrap(
+        odo_turn + drifted - true_turn)[turning])))
+    if apart <= MAX_TURN_MISMATCH:
+        return
+    mirrored = float(np.median(np.abs(wrap(odo_turn + true_turn)[turning])))
+    why = 'the two turn opposite ways (one yaw is clockwise; REP 103: ' \
+        'counter-clockwise is positive)' if mirrored <= MAX_TURN_MISMATCH \
+        else 'not this run\'s odometry, or a yaw not in radians'
+    raise FitError(
+        f'{odometry_name}: in the {int(turning.sum())} stretches of '
+        f'{window_m:g} m of {run} in which it or the truth turns '
+        f'{TURNING:g} rad or more, its turn (the fitted drift added back) '
+        f'differs from the true one by {math.degrees(apart):.3g} deg '
+        f'(median): {why} (fitting needs at most '
+        f'{math.degrees(MAX_TURN_MISMATCH):.3g})')
