@@ -63,7 +63,7 @@ def fit_odometry(odometry, stamps, xy, yaw, params=None, window_m=3.0,
     than :data:`MAX_GAP_S`, ``drift_sd`` its standard error over them (at
     least :data:`MIN_DRIFT_SD`). Raises :class:`FitError` naming what is
     wrong: too few stretches, or odometry unlike the run's truth (its
-    distance, drift or turns between scans).
+    distance, its drift, or its turns over the stretches).
     """
     params = params or FusionParams()
     run, odometry_name = names
