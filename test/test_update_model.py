@@ -30,7 +30,9 @@ from wifi_place_recognition.core.references import PROVENANCE, \
     with_references
 from wifi_place_recognition.core.scan import normalize_ap_id
 from wifi_place_recognition.core.update_check import newest
-from wifi_place_recognition.data.fingerprints import read_fingerprints
+from wifi_place_recognition.data.files import DataError
+from wifi_place_recognition.data.fingerprints import (check_trainable,
+                                                      read_fingerprints)
 from wifi_place_recognition.data.recording import FingerprintLog
 from wifi_place_recognition.ros.messages import status_values
 
@@ -318,6 +320,23 @@ def test_scans_a_references_only_update_cannot_use_are_named(site,
         in result.stderr, result.stderr
     assert _report(models, _history(models)[1])['put_in_use']['references'][
         'recorded']['left_out']['unknown_place'] == {'B0F2': 20}
+
+
+def test_messages_about_a_recorded_scan_name_its_file_and_row(tmp_path):
+    building = _building()
+    survey = read_fingerprints(str(_survey(tmp_path / 'survey.csv',
+                                           building, per_floor=10)))
+    path = _recorded(tmp_path / 'recorded.csv', building, scans=10)
+    lines = path.read_text().splitlines(True)
+    path.write_text(''.join(lines[:5]) + '0,7,' + lines[5].split(',', 2)[2]
+                    + ''.join(lines[6:]))     # its 5th scan: floor 7
+    recorded = read_fingerprints(str(path))
+    fp = update_model.together(survey, recorded, [])
+    with pytest.raises(DataError, match=f'^{survey.source} \\+ {path}: '
+                                        f'{path}: row 6, columns BUILDINGID'
+                                        f'/FLOOR: building 0, floor 7 has 1 '
+                                        f'scan'):
+        check_trainable(fp)
 
 
 def test_a_failed_rebuild_puts_the_checked_candidate_in_use(

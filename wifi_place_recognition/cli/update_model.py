@@ -125,7 +125,7 @@ def together(survey, recorded, leave_out):
     Return the survey and the recorded scans as one :class:`Fingerprints`.
 
     The AP columns of both, less ``leave_out`` (identifiers) and those no
-    scan heard; each file stays a walk.
+    scan heard; each file stays a walk, each scan its row in its file.
     """
     if (survey.position is None) != (recorded.position is None):
         raise ValueError('the survey and the recorded scans must both have '
@@ -141,13 +141,16 @@ def together(survey, recorded, leave_out):
                            np.full(len(p), p.source) for p in parts])
     position = None if survey.position is None else \
         np.concatenate([p.position for p in parts])
+    line = None if any(p.line is None for p in parts) else \
+        np.concatenate([p.line for p in parts])
     return Fingerprints(
         tuple(ap for ap, h in zip(ids, heard) if h), rssi[:, heard],
         np.concatenate([p.building for p in parts]),
         np.concatenate([p.floor for p in parts]), {},
         f'{survey.source} + {recorded.source}',
         sha256=f'{survey.sha256}+{recorded.sha256}', walk=walk,
-        position=position, position_columns=survey.position_columns)
+        position=position, position_columns=survey.position_columns,
+        line=line)
 
 
 def _param_lines(path):
