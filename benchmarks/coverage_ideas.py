@@ -77,7 +77,7 @@ from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.coverage import (
     COVERED_M, EDGE_RADIUS_M, one_sidedness, PAIRS_PER_STEP)
-from wifi_place_recognition.core.evaluation import align
+from wifi_place_recognition.core.evaluation import align, scan_answers
 from wifi_place_recognition.core.filter.angles import wrap
 from wifi_place_recognition.core.filter.fusion import Fusion, relative
 from wifi_place_recognition.core.filter.particles import UNKNOWN_VARIANCE
@@ -295,7 +295,11 @@ def late(hole, scans):
 
 
 def recent_mean(values, scans):
-    """Return each value averaged with those before it (``scans`` in all)."""
+    """
+    Return each value averaged with those before it (``scans`` in all).
+
+    Values that are not finite are left out; NaN where none is left.
+    """
     out = np.full(len(values), np.nan)
     for i in range(len(values)):
         window = values[max(0, i - scans + 1):i + 1]
@@ -305,12 +309,10 @@ def recent_mean(values, scans):
     return out
 
 
-def loudness(model, test):
-    """Return each test scan's loudness excess (dB; NaN: no AP shared)."""
-    rssi = align(model, test.fp)
-    proba = model.predict_positions(rssi)[0]
-    x = excesses(model.position, rssi, proba.argmax(axis=1))
-    return np.where(np.isfinite(x), x, np.nan)
+def loudness(model, test, proba):
+    """Return each test scan's loudness excess (dB; -inf: no AP shared)."""
+    return excesses(model.position, align(model, test.fp),
+                    proba.argmax(axis=1))
 
 
 def survey_positions(model):
@@ -363,7 +365,7 @@ def filters(fitted, single, side, hole, survey_xy, test, loud):
 def pair(trained, test, seeds):
     """Return the figures of one test run with one training run's models."""
     plain, fitted = (load_model(p) for p in trained[:2])
-    single = fb.single_scans(plain, test)
+    proba, *single = scan_answers(plain, test.fp)   # single: as fb's
     hole = fb.in_holes(test, trained[2])
     survey_xy = survey_positions(plain)
     side = one_sidedness(single[0], survey_xy)
@@ -380,7 +382,7 @@ def pair(trained, test, seeds):
     out['filters'] = {}
     for name, (params, coverage, fusion) in filters(
             fitted, single, side, hole, survey_xy, test,
-            loudness(plain, test)).items():
+            loudness(plain, test, proba)).items():
         runs = []
         for seed in seeds:
             xy, yaw, cov = fuse_offline(

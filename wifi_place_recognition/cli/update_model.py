@@ -450,9 +450,9 @@ def _referenced(in_use, path, survey, learned):
 
 def _left_out_notes(built):
     """Print a note per part of a references update with scans left out."""
-    for part in built.get('references', {}).values():
-        if not isinstance(part, dict):
-            continue
+    references = built.get('references')
+    for part in () if references is None else \
+            (references['survey'], references['recorded']):
         places = part['left_out']['unknown_place']
         silent = part['left_out']['no_known_ap']
         named = ', '.join(f'{k}: {n}' for k, n in places.items())
