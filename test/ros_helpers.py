@@ -176,17 +176,17 @@ class Client:
         pv = ParameterValue(type=kind, **{field: value})
         # resent if no reply: a request sent as the service is discovered
         # can go unanswered (its reply path not yet matched); setting the
-        # same value twice is harmless
-        for _ in range(3):
+        # same value twice is harmless, so a lost one costs 5 s, not more
+        for _ in range(9):
             future = self.params.call_async(SetParameters.Request(
                 parameters=[Parameter(name=name, value=pv)]))
             rclpy.spin_until_future_complete(self.node, future,
-                                             timeout_sec=15)
+                                             timeout_sec=5)
             if future.done():
                 return future.result().results[0]
             self.params.remove_pending_request(future)
-        raise AssertionError(f'no reply to setting {name} in 3 tries of '
-                             f'15 s')
+        raise AssertionError(f'no reply to setting {name} in 9 tries of '
+                             f'5 s')
 
     def close(self):
         """Destroy the publisher, subscriptions and client."""
