@@ -71,7 +71,7 @@ from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.locator import (
     calibrated_edge_sigma, EDGE_POWER, least_widening, LEVELS, Locator,
     R95)
-from wifi_place_recognition.core.preprocessing import signal
+from wifi_place_recognition.core.preprocessing import signal, signal_dbm
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.training.config import TrainConfig
 from wifi_place_recognition.training.coverage import auc, logit
@@ -104,16 +104,6 @@ def loud_name(k, m):
     return f'loud {k:g} dB, {m:g} m/dB'
 
 
-def dbm(value, representation, floor=-110.0):
-    """Return the dBm of a signal value (the inverse of ``signal``)."""
-    value = np.asarray(value, np.float64)
-    if representation == 'positive':
-        return floor + value
-    if representation == 'powed':
-        return floor - floor * value ** (1 / np.e)
-    return floor + 24 * np.log1p(value * np.expm1(-floor / 24))
-
-
 def excess(locator, columns, rssi, c):
     """
     Return how much louder than the survey a scan hears an AP (dB).
@@ -128,8 +118,9 @@ def excess(locator, columns, rssi, c):
     shared = rows >= 0
     if not shared.any():
         return -np.inf
-    loudest = dbm(locator.scale[locator.ap_start[g] + rows[shared]] *
-                  LEVELS, locator.representation)
+    loudest = signal_dbm(locator.scale[locator.ap_start[g] +
+                                       rows[shared]] * LEVELS,
+                         locator.representation)
     return float(np.max(np.asarray(rssi, np.float64)[shared] - loudest))
 
 
@@ -248,7 +239,7 @@ def pair(model, survey_csv, test, kept, calibrated):
     ``calibrated``: the survey's :func:`calibrated_loud_m`.
     """
     rssi = align(model, test.fp)
-    proba, xy, circle, p = model.predict_positions(rssi, coverage=True)
+    proba, xy, circle, p, _ = model.predict_positions(rssi, coverage=True)
     loud = excesses(model.position, rssi, proba.argmax(axis=1))
     loud_m, loud_scans = calibrated
     knn = model.predict_positions(rssi, widened=False)[2]

@@ -22,6 +22,14 @@ from the held-out scans (``as_learned``: the share covered among them,
 before ``PRIOR_FLOOR``), and with other floors (``floors``); and the
 floor leave-one-building-out would choose by the ECE. One seed.
 
+And the scans' mismatch (every dataset, with a coverage model or not):
+the survey's usual mismatch on covered ground, which ``train_model``
+learns from held-out stretches (``usual_mismatch_db``), against the
+median mismatch of the test file's covered scans (another day), their
+ratio, the test scans' median ratio off the survey, and the ROC AUC of
+each scan's mismatch against the scans off the survey (the filter
+widens the scans whose recent mismatch is above the usual).
+
     python benchmarks/coverage_check.py
 """
 
@@ -103,6 +111,26 @@ def check(model, train, test):
                    for f in FLOORS}}
 
 
+def mismatch(model, train, test):
+    """Return how the test file's scans sound against the usual (dict)."""
+    usual = model.position.usual_mismatch
+    if not usual:
+        return {'usual_mismatch_db': 0.0, 'note': 'not known'}
+    ratio = scan_answers(model, test)[4]
+    place = np.column_stack([test.building, test.floor])
+    covered = distance_by_place(
+        test.position, place, train.position,
+        np.column_stack([train.building, train.floor])) <= COVERED_M
+    known = np.isfinite(ratio)
+    on, off = known & covered, known & ~covered
+    return {'usual_mismatch_db': usual,
+            'covered_median_db': float(np.median(ratio[on]) * usual),
+            'covered_over_usual': float(np.median(ratio[on])),
+            'off_over_usual': float(np.median(ratio[off])) if off.any()
+            else None,
+            'auc_off': _finite(auc(ratio[known], ~covered[known]))}
+
+
 def leave_one_building_out(results):
     """
     Return, per building, the floor the others' mean ECE would choose.
@@ -182,11 +210,19 @@ def main():
             files, train, test = _data(args.datasets_root, name, holes,
                                        folder)
             model, basis = _model(name, files, folder)
+            sound = mismatch(model, train, test)
+            print(f'{key:16s} mismatch: usual '
+                  f'{sound["usual_mismatch_db"]:.2f} dB, covered test '
+                  f'scans {_cell(sound.get("covered_over_usual"), ".2f")}'
+                  f' x, off {_cell(sound.get("off_over_usual"), ".2f")} x,'
+                  f' AUC {_cell(sound.get("auc_off"), ".2f")}')
             if model.coverage is None:
-                results[key] = {'model': basis, 'coverage_model': None}
+                results[key] = {'model': basis, 'coverage_model': None,
+                                'mismatch': sound}
                 print(f'{key:16s} no coverage model')
                 continue
-            r = results[key] = {'model': basis, **check(model, train, test)}
+            r = results[key] = {'model': basis, **check(model, train, test),
+                                'mismatch': sound}
             print(f'{key:16s} {r["test_scans"]:6d} '
                   f'{r["covered_share"]:8.3f} {_cell(r["auc"]):>6s} '
                   f'{r["ece"]:6.3f} {r["judged_off_share"]:6.3f} '

@@ -7,8 +7,10 @@ scans, ``fit_odometry`` on the training run's scans and odometry (a copy
 of the model), then the test run's scans (each with its own sigma) and
 odometry in stamp order through :func:`core.filter.trajectory.fuse_offline`
 (what classifier_node runs) with the model's fusion parameters: fitted,
-and the defaults (drift not fitted). Started with no prior (the first
-scan, every heading); seeds 0, 1, 2 of the filter.
+and the defaults (drift not fitted); both also without the scans'
+mismatch (``mismatch_scans`` 0: round 23's filter, in the same run).
+Started with no prior (the first scan, every heading); seeds 0, 1, 2 of
+the filter.
 
 Each pair twice: with the training run whole, and with survey holes: a
 third of the training run's scans cut out, in pieces of 15-25 m driven
@@ -16,7 +18,9 @@ third of the training run's scans cut out, in pieces of 15-25 m driven
 drives where the survey has no scan (besides what the training run never
 visited). Test scans farther than 3 m from every kept training scan are
 "in a hole": single and fused errors are also given there, and how
-well the model's coverage probability tells them (ROC AUC, reliability);
+well the model's coverage probability tells them (ROC AUC, reliability)
+and the scans' mismatch (ROC AUC, per scan and over the filter's last
+scans);
 the filter weighing scans by it (``coverage_full`` 0.5, fitted) and,
 as an upper bound, told which scans lie in holes (coverage 0 there, 1
 elsewhere) are scored beside the default; and the filter set at the
@@ -63,6 +67,7 @@ from wifi_place_recognition.core.coverage import (COVERED_M,
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.evaluation import scan_answers
 from wifi_place_recognition.core.filter.fusion import Fusion
+from wifi_place_recognition.core.filter.mismatch import RecentMismatch
 from wifi_place_recognition.core.filter.odometry_fit import (FitError,
                                                              fit_odometry)
 from wifi_place_recognition.core.filter.particles import FusionParams
@@ -125,6 +130,15 @@ CANDIDATES = (
     {'drift_walk': 0.001},          # the drift steadier (round 18)
     {'drift_walk': 0.0005},
     {'particles': 20000},           # more particles: 7 times the cost
+    {'mismatch_scans': 0},          # scans as wide however unlike the
+    #                                 survey they sound (round 23)
+    {'mismatch_full': 1.0, 'mismatch_none': 1.4},   # round 24: from what,
+    {'mismatch_full': 1.2, 'mismatch_none': 1.8},   # to what, how wide
+    {'mismatch_width': 12.0},
+    {'mismatch_width': 24.0},
+    {'mismatch_width': 24.0, 'mismatch_full': 1.0, 'mismatch_none': 1.4},
+    {'mismatch_scans': 3},
+    {'mismatch_scans': 10},
 )
 
 
@@ -204,8 +218,37 @@ def models(train, folder, holes=False):
 
 
 def single_scans(model, run):
-    """Return a model's single-scan (positions, sigmas, coverage) of a run."""
+    """
+    Return a model's single-scan answers of a run, as the node's filter.
+
+    (positions, sigmas, coverage, mismatch over the survey's usual).
+    """
     return scan_answers(model, run.fp)[1:]
+
+
+def mismatch_figures(mismatch, hole, ok, scans):
+    """
+    Return how the scans' mismatch tells the scans in holes.
+
+    ROC AUC (those in holes against covered scans, over the test scans
+    with a position) of each scan's mismatch over the survey's usual and
+    of its mean over the last ``scans`` (the filter's
+    :class:`.mismatch.RecentMismatch`); the median of that mean on
+    covered ground and in holes.
+    """
+    from wifi_place_recognition.training.coverage import auc
+    recent = RecentMismatch(scans)
+    mean = np.array([np.nan if m is None else m for m in
+                     map(recent.add, mismatch)])
+    use = ok & np.isfinite(mean)
+    if not use.any():
+        return {'auc': None, 'note': 'the model has no usual mismatch'}
+    one = use & np.isfinite(mismatch)
+    return {'auc_scan': auc(mismatch[one], hole[one]),
+            'auc': auc(mean[use], hole[use]),
+            'median_covered': float(np.median(mean[use & ~hole])),
+            'median_in_holes': float(np.median(mean[use & hole])) if
+            (use & hole).any() else None}
 
 
 def detector_figures(coverage, hole, ok):
@@ -297,6 +340,8 @@ def pair(trained, test):
     ok = np.isfinite(test.xy).all(axis=1)
     out = {'single': single_figures(test, single, hole),
            'coverage_detector': detector_figures(single[2], hole, ok),
+           'mismatch_detector': mismatch_figures(
+               single[3], hole, ok, fitted.fusion.mismatch_scans),
            'odometry': score(test.stamps, test.xy, odo_xy, test.yaw,
                              odo_yaw),
            'drift_fitted_deg_per_m': math.degrees(fitted.fusion.drift_mean)}
@@ -304,6 +349,10 @@ def pair(trained, test):
     for name, params, given, start in (
             ('fused_fitted', fitted.fusion, single, False),
             ('fused_default', FusionParams(), single, False),
+            ('fused_mismatch_off', replace(fitted.fusion, mismatch_scans=0),
+             single, False),
+            ('fused_default_mismatch_off', FusionParams(mismatch_scans=0),
+             single, False),
             ('fused_coverage', replace(fitted.fusion, coverage_full=0.5),
              single, False),
             ('fused_told_holes', replace(fitted.fusion, coverage_full=0.5),
@@ -476,10 +525,15 @@ def coverage_line(name, survey, figures):
     """
     def mean(runs):
         return float(np.mean([r['ratio'] for r in runs]))
-    d, start = figures['coverage_detector'], figures['fused_set_start']
-    a = 'n/a' if d.get('auc') is None else f'{d["auc"]:.2f}'
-    return (f'{name:22s} {survey:6s} detector AUC {a:>4s} | ratio: '
-            f'coverage off {mean(figures["fused_fitted"]):.2f}, weighed '
+
+    def area(d):
+        return 'n/a' if d.get('auc') is None else f'{d["auc"]:.2f}'
+    start = figures['fused_set_start']
+    return (f'{name:22s} {survey:6s} AUC coverage '
+            f'{area(figures["coverage_detector"]):>4s}, mismatch '
+            f'{area(figures["mismatch_detector"]):>4s} | ratio: '
+            f'default {mean(figures["fused_fitted"]):.2f}, mismatch off '
+            f'{mean(figures["fused_mismatch_off"]):.2f}, coverage weighed '
             f'{mean(figures["fused_coverage"]):.2f}, told the holes '
             f'{mean(figures["fused_told_holes"]):.2f} | start set: ratio '
             f'{mean(start):.2f}, p95 {max(r["p95_m"] for r in start):.2f}, '

@@ -65,7 +65,7 @@ from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.coverage import (COVERED_M,
                                                   distance_to_survey)
-from wifi_place_recognition.core.evaluation import align, scan_answers
+from wifi_place_recognition.core.evaluation import scan_answers
 from wifi_place_recognition.core.filter.trajectory import (fuse_offline,
                                                            score, truth_at)
 from wifi_place_recognition.core.filter.fusion import Fusion
@@ -93,9 +93,13 @@ GOALS = ('single-scan error on the cut scans after <= 1.2 x a perfect '
 
 
 def errors(model, fp, xy):
-    """Return each scan's error in metres, and the model's (xy, sigma)."""
-    _, out, sigma = model.predict_positions(align(model, fp))
-    return np.linalg.norm(out - xy, axis=1), (out, sigma)
+    """
+    Return each scan's error in metres, and the model's answers.
+
+    (xy, sigma, coverage, mismatch), as the node's filter takes them.
+    """
+    _, out, *answers = scan_answers(model, fp)
+    return np.linalg.norm(out - xy, axis=1), (out, *answers)
 
 
 def figures(error, mask=None):
@@ -137,9 +141,10 @@ def working_streams(model, run):
     The scans' k-NN sigma, as the monitor reads it (not widened), and
     their coverage probability (the APs the model lacks counted).
     """
-    proba, xy, sigma, coverage = scan_answers(model, run.fp, widened=False)
+    proba, xy, sigma, coverage, mismatch = scan_answers(model, run.fp,
+                                                        widened=False)
     scans = (run.stamps, xy, sigma, coverage)
-    fxy, fyaw, fcov = fuse_offline(run.odometry, scans,
+    fxy, fyaw, fcov = fuse_offline(run.odometry, (*scans, mismatch),
                                    Fusion(model.fusion, seed=0))
     places = [model.classes[c] for c in proba.argmax(axis=1)]
     return scans, (run.stamps, fxy, fyaw, fcov), places

@@ -169,15 +169,21 @@ def train(test, others, folder, with_holes):
 
 def scan_stream(model, run):
     """
-    Return the scans' own positions: (t, xy (n, 2), sigma (n,), coverage).
+    Return the scans' answers: (t, xy (n, 2), sigma (n,), coverage, mismatch).
 
     The k-NN's sigma, as classifier_node gives it to the monitor
     (``scan_knn_sigma_m``), not widened at the survey's edge, and the
     coverage probability (NaN without a coverage model), the APs the
-    model lacks counted as the node counts them.
+    model lacks counted as the node counts them; the mismatch, which
+    the node's filter reads (the monitor reads the first four:
+    :func:`to_monitor`).
     """
-    _, xy, sigma, coverage = scan_answers(model, run.fp, widened=False)
-    return run.stamps, xy, sigma, coverage
+    return (run.stamps, *scan_answers(model, run.fp, widened=False)[1:])
+
+
+def to_monitor(scans):
+    """Return what the monitor reads of :func:`scan_stream`'s answers."""
+    return scans[:4]
 
 
 def survey(model):
@@ -341,7 +347,7 @@ def window(stream, t0, local):
 def judged(local, fused, scans, survey_xy, t0, params):
     """Return the judgements of an episode's window."""
     return judge_offline(window(local, t0, local), window(fused, t0, local),
-                         params, scans=window(scans, t0, local),
+                         params, scans=to_monitor(window(scans, t0, local)),
                          survey=survey_xy)
 
 
@@ -371,7 +377,7 @@ def evaluate(case, params):
            'inside': len(case.inside), 'startup': []}
     for key, streams in case.fused.items():
         counts = [len(alarms(judge_offline(
-            case.local, f, params, scans=case.scans[key],
+            case.local, f, params, scans=to_monitor(case.scans[key]),
             survey=case.survey[key]))) for f in streams]
         out['false_alarms'][key] = {'alarms': counts, 'per_hour': float(
             np.mean(counts) / hours)}

@@ -36,8 +36,8 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
     #                                   two answered at the hole's edges
     with running_node(ros, tmp_path, model_path, 'coverage_node') as (
             client, proc, model):
-        _, _, sigma, expected = model.predict_positions(align(model, fp),
-                                                        coverage=True)
+        _, _, sigma, expected, _ = model.predict_positions(
+            align(model, fp), coverage=True)
         narrow = model.predict_positions(align(model, fp), widened=False)[2]
         got, sigmas, knn = [], [], []
         for row in rows:

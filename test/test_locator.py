@@ -10,7 +10,8 @@ from wifi_place_recognition.core.artifact import (_digest, load_model,
                                                   ModelFileError, save_model)
 from wifi_place_recognition.core.locator import (calibrated_edge_sigma,
                                                  calibrated_sigma, Locator,
-                                                 MAX_EDGE_SIGMA_M, R95)
+                                                 MAX_EDGE_SIGMA_M,
+                                                 MAX_MISMATCH_DB, R95)
 from wifi_place_recognition.core.preprocessing import signal
 
 
@@ -140,6 +141,22 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
         with pytest.raises(ModelFileError,
                            match='edge_sigma_m must be a number'):
             load_model(tmp_path / 'bad.npz')
+    # So is the usual mismatch; a file without one (older) has none.
+    model.position.usual_mismatch = 3.5
+    save_model(model, tmp_path / 'm.npz')
+    assert load_model(tmp_path / 'm.npz').position.usual_mismatch == 3.5
+    _rewrite_header(tmp_path / 'm.npz',
+                    lambda h: h['position'].pop('usual_mismatch_db'))
+    assert load_model(tmp_path / 'm.npz').position.usual_mismatch == 0.0
+    for value in (-1.0, MAX_MISMATCH_DB + 1, float('nan'), 'loud', True):
+        bad = replace(model.position)
+        object.__setattr__(bad, 'usual_mismatch', value)
+        save_unchecked(replace(model, position=bad), tmp_path / 'bad.npz')
+        with pytest.raises(ModelFileError,
+                           match='usual_mismatch_db must be a number'):
+            load_model(tmp_path / 'bad.npz')
+    with pytest.raises(ValueError, match='usual_mismatch must be in'):
+        replace(model.position, usual_mismatch=-2.0)
     bad = replace(model.position)
     bad.metric = 'manhattan'
     save_unchecked(replace(model, position=bad), tmp_path / 'bad.npz')
@@ -235,3 +252,42 @@ def test_the_edge_sigma_is_the_least_that_holds_95_percent():
         MAX_EDGE_SIGMA_M
     assert calibrated_edge_sigma(np.empty(0), np.empty(0),
                                  np.empty(0)) == 0.0
+
+
+@pytest.mark.parametrize('representation', ['positive', 'powed',
+                                            'exponential'])
+def test_the_mismatch_is_how_unlike_its_nearest_references_a_scan_sounds(
+        representation):
+    rng = np.random.default_rng(3)
+    # 40 places, each surveyed 5 times (readings 1 dB apart)
+    places, _, place_xy = _references(rng, n=40, n_aps=30, n_classes=1)
+    places[:, :6] = rng.uniform(-90, -50, (40, 6))   # heard everywhere
+    rssi = np.repeat(places, 5, axis=0) + rng.normal(0, 1, (200, 30))
+    locator = Locator.build(rssi, np.zeros(200, np.int64),
+                            np.repeat(place_xy, 5, axis=0), 1,
+                            representation=representation,
+                            usual_mismatch=2.0)
+
+    def mismatch(row):
+        cols = np.flatnonzero(~np.isnan(row))
+        distance = locator.distances(
+            cols, signal(row[cols], representation), 0)
+        return (locator.mismatch(cols, row[cols], 0, distance),
+                locator.relative_mismatch(cols, row[cols], 0, distance))
+    one = places[17].astype(np.float64)     # at a surveyed place
+    assert mismatch(one)[0] < 2.0           # about the readings' noise
+    # every AP 8 dB louder (another device, another day): the same
+    assert abs(mismatch(one + 8.0)[0] - mismatch(one)[0]) < 0.5
+    # the APs it shares with them at other strengths: several dB
+    heard = np.flatnonzero(~np.isnan(one))
+    other = one.copy()
+    other[heard] = rng.permutation(one[heard])
+    got, relative = mismatch(other)
+    assert got > 4.0 and relative == pytest.approx(got / 2.0)
+    # fewer than two APs shared with the nearest: not known
+    lone = np.full(30, np.nan)
+    lone[heard[0]] = -60.0
+    assert np.isnan(mismatch(lone)[0])
+    # no usual mismatch (an older model): the ratio is not known
+    locator.usual_mismatch = 0.0
+    assert np.isnan(mismatch(other)[1])

@@ -10,7 +10,9 @@ less, and the pose follows odometry; a kidnapped robot still restarts.
 import math
 
 import numpy as np
+import pytest
 from wifi_place_recognition.core.filter.fusion import Fusion
+from wifi_place_recognition.core.filter.mismatch import RecentMismatch
 from wifi_place_recognition.core.filter.particles import (DISAGREED,
                                                           FusionParams,
                                                           ParticleFilter)
@@ -154,6 +156,68 @@ def test_a_kidnapped_robot_still_restarts_where_the_scans_are():
         stamps[:, None] >= 120, [30.0, 20.0], 0.0)), axis=1)
     assert fusion.counts['restarts'] >= 2
     assert error[stamps >= 180].max() < 3.0
+
+
+def test_scans_that_sound_unlike_the_survey_do_not_drag_the_pose():
+    # A hole beside a surveyed stretch: for 60 s the scans are answered 6
+    # m aside, moving as the robot does (their misfit says nothing), but
+    # they sound unlike the references they are placed at (twice the
+    # survey's usual mismatch; 1 elsewhere). Widened, they hold the
+    # particles together and drag them less (not nothing: 60 scans all 6
+    # m aside, the worst a hole can be).
+    odometry, stamps, truth = drive()
+    scans = noisy(truth)
+    inside = (stamps >= 100) & (stamps < 160)
+    scans[inside] += [0.0, 6.0]
+    mismatch = np.where(inside, 2.0, 1.0)
+    answers = (stamps, scans, np.full(len(stamps), np.nan),
+               [None] * len(stamps), mismatch)
+
+    def errors(params, seed):
+        fusion = Fusion(params, seed=seed)
+        xy = fuse_offline(odometry, answers, fusion)[0]
+        return np.linalg.norm(xy - truth, axis=1), fusion.counts
+    widened = [errors(FusionParams(), s) for s in SEEDS]
+    believed = [errors(FusionParams(mismatch_scans=0), s) for s in SEEDS]
+    worst = np.array([e[inside].max() for e, _ in widened])
+    dragged = np.array([e[inside].max() for e, _ in believed])
+    assert np.median(dragged) > 6.0, dragged
+    assert np.median(worst) < 0.8 * np.median(dragged), (worst, dragged)
+    assert (worst < dragged).sum() >= 9, (worst, dragged)
+    # counted in the health; back on covered ground, the last 5 scans'
+    # mean decides: as the filter that believed them, or sooner
+    assert all(c['scans_unlike_survey'] == pytest.approx(inside.sum(), abs=3)
+               for _, c in widened)
+    after = (stamps >= 180) & (stamps < 200)
+    assert np.median([e[after].max() for e, _ in widened]) < 2.0
+
+
+def test_a_scan_is_as_wide_as_it_sounds_like_the_survey():
+    recent = RecentMismatch(3)
+    assert recent.add(None) is None and recent.add(math.nan) is None
+    assert [recent.add(v) for v in (1.0, 2.0, math.nan, 3.0, 4.0)] == \
+        [1.0, 1.5, 1.5, 2.0, 3.0]
+    recent.clear()
+    assert recent.add(None) is None
+    sensor = WifiSensorModel(FusionParams(mismatch_full=1.2,
+                                          mismatch_none=1.6,
+                                          mismatch_width=20.0))
+    xy = np.zeros(2)
+    for mismatch, width in ((None, 4.0), (0.5, 4.0), (1.2, 4.0), (1.4, 12.0),
+                            (1.6, 20.0), (3.0, 20.0)):
+        scan = WifiPosition(xy, mismatch=mismatch)
+        assert sensor.width(scan) == pytest.approx(width), mismatch
+        # widened, it still testifies: a kidnap is still found
+        assert sensor.trust(scan) == 1.0 and sensor.testifies(scan)
+    # the widest of its reasons
+    assert sensor.width(WifiPosition(xy, misfit=15.0, mismatch=1.4)) == 30.0
+    off = WifiSensorModel(FusionParams(mismatch_scans=0))
+    assert off.width(WifiPosition(xy, mismatch=3.0)) == 4.0
+    for full, none in ((1.6, 1.2), (1.2, 1.2), (0.0, 1.0)):
+        with pytest.raises(ValueError, match=f'mismatch_full = {full!r}'):
+            FusionParams(mismatch_full=full, mismatch_none=none)
+    with pytest.raises(ValueError, match='mismatch_width = 0'):
+        FusionParams(mismatch_width=0)
 
 
 def test_an_odometry_jump_starts_the_scans_track_again():

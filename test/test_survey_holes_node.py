@@ -10,11 +10,14 @@ scans are not trusted; the health counts the scans trusted less. Scans
 took for another) are believed: the pose is dragged, and once they end it
 is moved back to where odometry carried the pose it had before them
 (hindsight, with the odometry's drift known; counted in the health).
+Where the survey really has a hole (a model trained without a third of
+the floor), the scans taken there sound unlike the references they are
+placed at: the node widens them and counts them.
 """
 
 import math
 
-from conftest import wait_until
+from conftest import FAST, python_module, run, surveyed_csv, wait_until
 import numpy as np
 import pytest
 from ros_helpers import running_node
@@ -136,3 +139,53 @@ def test_a_pose_dragged_by_a_twin_corridor_comes_back(
         assert error[after:].max() < error[after - 1] + 0.5, error[after:]
         assert wait_until(lambda: int(health(client)[
             'fusion_hindsight_moves']) >= 1, 10, ros), health(client)
+
+
+@pytest.fixture
+def holed_model(tmp_path):
+    """
+    Return a model of surveyed_csv's floor 0 with a survey hole.
+
+    Not surveyed where x < 20 and y > 20 (m). The drive's square (8 to
+    32 m, counter-clockwise from the south-west corner) enters that
+    quarter a minute after it starts, its heading known, and drives 24 m
+    in it round the north-west corner.
+    """
+    csv = surveyed_csv(tmp_path / 'all.csv', floors=(0,))
+    lines = csv.read_text().splitlines()
+    x = lines[0].split(',').index('X')
+
+    def surveyed(line):
+        cells = line.split(',')
+        xy = np.array([float(cells[x]), float(cells[x + 1])]) - ORIGIN
+        return not (xy[0] < 20.0 and xy[1] > 20.0)
+    kept = [lines[0]] + [line for line in lines[1:] if surveyed(line)]
+    (tmp_path / 'holed.csv').write_text('\n'.join(kept) + '\n')
+    result = run(python_module(
+        'cli.train_model', '--data', tmp_path / 'holed.csv', '-o',
+        tmp_path / 'holed.npz', *FAST, '--epochs', '20'))
+    assert result.returncode == 0, result.stderr
+    assert load_model(tmp_path / 'holed.npz').position.usual_mismatch > 0
+    return tmp_path / 'holed.npz'
+
+
+def test_scans_from_a_survey_hole_are_widened_and_counted(
+        ros, tmp_path, holed_model):
+    with running_node(ros, tmp_path, holed_model,
+                      'holed_node', *RELIABLE_ODOM) as (client, proc, _):
+        drive = Drive(ros, client, 'holed_node')
+        truth = square(laps=1.0)
+        results = drive_with_holes(drive, truth,
+                                   odometry_of(truth, drift=0.0),
+                                   lambda since, x, y: (x, y, ''))
+        true = np.array([r[0] for r in results])
+        fused = np.array([r[1] for r in results])
+        at = true - ORIGIN
+        hole = (at[:, 0] < 17.0) & (at[:, 1] > 23.0)   # 3 m into it
+        error = np.linalg.norm(fused - true, axis=1)
+        # the scans there are answered at the hole's edge; the node
+        # widens them (their misfit to odometry widens most of them too)
+        assert hole.sum() >= 15, hole.sum()
+        assert error[hole].max() < 3.5, error[hole]
+        assert wait_until(lambda: int(health(client)[
+            'fusion_scans_unlike_survey']) >= 10, 10, ros), health(client)

@@ -27,7 +27,7 @@ from wifi_place_recognition.core.locator import (calibrated_edge_sigma,
 from wifi_place_recognition.core.preprocessing import signal
 from wifi_place_recognition.training.selection import (
     _covered, _cross_validate_position, _Split, COVERED_M, cross_validate,
-    fit_temperature)
+    fit_temperature, usual_mismatch)
 from wifi_place_recognition.training.trainer import train
 
 SMALL = dict(sae_layers=(32, 16), classifier_layers=(16,), sae_epochs=3,
@@ -463,3 +463,12 @@ def test_the_sigma_is_calibrated_on_held_out_scans_the_kept_ones_cover(
     assert (error <= R95 * sigma)[~covered].mean() + 0.05 < \
         inside[~covered].mean()
     assert inside[covered].mean() >= 0.95
+
+
+def test_the_usual_mismatch_is_the_covered_held_out_scans_median():
+    mismatch = np.array([1.0, 2.0, 3.0, 40.0, np.nan] * 10)
+    covered = np.array([True, True, True, False, True] * 10)
+    # the scans off the survey and those without a mismatch left out
+    assert usual_mismatch(mismatch, covered) == (2.0, 30)
+    # fewer than 30: not known
+    assert usual_mismatch(mismatch[:45], covered[:45]) == (0.0, 27)

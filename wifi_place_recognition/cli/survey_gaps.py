@@ -117,7 +117,7 @@ def off_survey(model, fp, covered_m):
     """
     rssi = align(model, fp)
     strangers = int((~np.isfinite(rssi).any(axis=1) & ~fp.empty_rows).sum())
-    proba, _, _, coverage = model.predict_positions(
+    proba, _, _, coverage, _ = model.predict_positions(
         rssi, coverage=True, unknown=unknown_aps(model, fp))
     if fp.position is None:
         if model.coverage is None:

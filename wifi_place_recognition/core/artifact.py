@@ -19,7 +19,8 @@ import numpy as np
 from .archive import ZIP_ERRORS
 from .atomic import atomic_write
 from .coverage import CoverageModel
-from .locator import LEVELS, Locator, MAX_EDGE_SIGMA_M, METRICS
+from .locator import (LEVELS, Locator, MAX_EDGE_SIGMA_M, MAX_MISMATCH_DB,
+                      METRICS)
 from .model import ACTIVATIONS, Layer, PlaceModel
 from .preprocessing import RssiScaler, SIGNALS
 from .filter.particles import FusionParams
@@ -96,7 +97,8 @@ def save_model(model, path):
                               'columns': list(pos.columns), 'units': 'm',
                               'representation': pos.representation,
                               'metric': pos.metric,
-                              'edge_sigma_m': pos.edge_sigma}
+                              'edge_sigma_m': pos.edge_sigma,
+                              'usual_mismatch_db': pos.usual_mismatch}
     unpacked = sum(a.nbytes for a in arrays.values())
     if unpacked > MAX_UNPACKED_BYTES:
         raise ValueError(f'the model would unpack to {unpacked} bytes, more '
@@ -295,6 +297,11 @@ def _position(header, arrays, n_aps, n_classes):
             not 0 <= edge <= MAX_EDGE_SIGMA_M:
         raise ModelFileError(f'position: edge_sigma_m must be a number in '
                              f'[0, {MAX_EDGE_SIGMA_M:g}], not {edge!r}')
+    usual = spec.get('usual_mismatch_db', 0.0)  # older files: not known
+    if isinstance(usual, bool) or not isinstance(usual, (int, float)) or \
+            not 0 <= usual <= MAX_MISMATCH_DB:
+        raise ModelFileError(f'position: usual_mismatch_db must be a number '
+                             f'in [0, {MAX_MISMATCH_DB:g}], not {usual!r}')
     a = {name: arrays[f'position.{name}'] for name in LOCATOR_ARRAYS}
     if not all(np.isfinite(v).all() for v in a.values()) or \
             not all((a[i] == np.round(a[i])).all() and (a[i] >= 0).all()
@@ -337,7 +344,8 @@ def _position(header, arrays, n_aps, n_classes):
     return Locator(origin, group_start, ap_start, ap_column, a['scale'],
                    a['codes'].astype(np.int8), a['norms'], a['xy'],
                    a['sigma'], group, n_aps, k, tuple(columns),
-                   spec['representation'], spec['metric'], float(edge))
+                   spec['representation'], spec['metric'], float(edge),
+                   float(usual))
 
 
 def _layers(specs, arrays, n_inputs, n_outputs):

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from .coverage import EDGE_RADIUS_M, one_sidedness
-from .preprocessing import signal, SIGNALS
+from .preprocessing import signal, signal_dbm, SIGNALS
 
 #: Distances the k-NN can use: Euclidean, or Sorensen (Bray-Curtis),
 #: sum(abs(q - r)) / sum(q + r).
@@ -32,6 +32,12 @@ R95 = float(np.sqrt(-2 * np.log(0.05)))
 MIN_SIGMA = 0.1
 #: Largest int8 code of a reference value.
 LEVELS = 127
+#: A scan's mismatch (:meth:`Locator.mismatch`) is read against this many
+#: of its nearest references.
+MISMATCH_NEIGHBOURS = 5
+#: The largest usual mismatch (dB) a model may carry: readings 60 dB off
+#: their references after the offset is taken out are not a survey's.
+MAX_MISMATCH_DB = 60.0
 #: The largest edge sigma (m) a survey may calibrate
 #: (:func:`calibrated_edge_sigma`): a 95 % circle of 37 m around an answer
 #: at the survey's very edge.
@@ -64,6 +70,9 @@ class Locator:
     EDGE_POWER)``, side the answer's :func:`.coverage.one_sidedness`
     among the references, ``edge_sigma`` (m) calibrated on held-out scans
     off the survey (:func:`calibrated_edge_sigma`; 0: not widened).
+    ``usual_mismatch`` (dB): the median :meth:`mismatch` of held-out scans
+    on covered ground, what another day's scans there show too (0: not
+    known).
     """
 
     origin: np.ndarray    # float64 (2,)
@@ -83,6 +92,7 @@ class Locator:
     representation: str = 'positive'  # one of preprocessing.SIGNALS
     metric: str = 'euclidean'         # one of METRICS
     edge_sigma: float = 0.0   # m, added at a one-sided answer (see above)
+    usual_mismatch: float = 0.0  # dB, on covered ground (see above)
     blocks: list = field(init=False, repr=False)   # views into codes
     row_of: np.ndarray = field(init=False, repr=False)  # (g, n_aps), -1
     by_x: list = field(init=False, repr=False)  # per group: (order, x)
@@ -97,6 +107,10 @@ class Locator:
             raise ValueError(f'edge_sigma must be in [0, '
                              f'{MAX_EDGE_SIGMA_M:g}] m, not '
                              f'{self.edge_sigma!r}')
+        if not 0 <= self.usual_mismatch <= MAX_MISMATCH_DB:
+            raise ValueError(f'usual_mismatch must be in [0, '
+                             f'{MAX_MISMATCH_DB:g}] dB, not '
+                             f'{self.usual_mismatch!r}')
         n_groups = len(self.group_start) - 1
         refs = np.diff(self.group_start)
         rows = np.diff(self.ap_start)
@@ -117,7 +131,8 @@ class Locator:
     @classmethod
     def build(cls, rssi, classes, xy, n_classes, neighbours=5,
               sigma=None, columns=('X', 'Y'), representation='positive',
-              metric='euclidean', group=None, edge_sigma=0.0):
+              metric='euclidean', group=None, edge_sigma=0.0,
+              usual_mismatch=0.0):
         """
         Return a locator of reference scans ``rssi`` (dBm, NaN: undetected).
 
@@ -157,7 +172,7 @@ class Locator:
                    (xy - origin).astype(np.float32),
                    np.asarray(sigma, np.float32), group, inputs.shape[1],
                    int(neighbours), tuple(columns), representation, metric,
-                   float(edge_sigma))
+                   float(edge_sigma), float(usual_mismatch))
 
     def locate(self, columns, rssi, c, neighbours=None):
         """
@@ -235,6 +250,45 @@ class Locator:
                                                  at[0] + EDGE_RADIUS_M))
         return one_sidedness(at[None],
                              self.reference_xy(c)[order[first:last]])[0]
+
+    def mismatch(self, columns, rssi, c, distance):
+        """
+        Return how unlike its nearest references a scan sounds (dB).
+
+        Over the scan's APs (``columns``, ``rssi`` dBm) that any of its
+        :data:`MISMATCH_NEIGHBOURS` nearest references of class c heard
+        (``distance``: :meth:`distances`): the root mean square of the
+        scan's reading less the loudest of theirs, after taking out the
+        median of those differences (a device or a day that hears every
+        AP louder or softer). A scan taken where the survey never went
+        hears the APs it shares with the references it resembles most
+        at other strengths than they did. NaN with fewer than two such
+        APs.
+        """
+        if len(distance) == 0:
+            return float('nan')
+        g = self.group[c]
+        k = min(MISMATCH_NEIGHBOURS, len(distance))
+        near = np.argpartition(distance, k - 1)[:k]
+        rows = self.row_of[g, columns]
+        shared = rows >= 0
+        rows = rows[shared]
+        codes = self.blocks[g][rows][:, near]
+        heard = (codes > 0).any(axis=1)
+        if heard.sum() < 2:
+            return float('nan')
+        loudest = signal_dbm(codes[heard].max(axis=1) *
+                             self.scale[self.ap_start[g] + rows[heard]]
+                             .astype(np.float64), self.representation)
+        delta = np.asarray(rssi, np.float64)[shared][heard] - loudest
+        return float(np.sqrt(np.mean((delta - np.median(delta)) ** 2)))
+
+    def relative_mismatch(self, columns, rssi, c, distance):
+        """Return :meth:`mismatch` over :attr:`usual_mismatch` (NaN: none)."""
+        if not self.usual_mismatch:
+            return float('nan')
+        return self.mismatch(columns, rssi, c, distance) / \
+            self.usual_mismatch
 
     def positions(self, distance, ks, c):
         """

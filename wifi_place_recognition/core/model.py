@@ -162,7 +162,8 @@ class PlaceModel:
 
         The batch form of :meth:`locate`: the sigma of the 95 % circle, or
         with ``widened`` false the k-NN's; with ``coverage``, each scan's
-        probability of being covered (n,) too. ``unknown``: how many more
+        probability of being covered (n,) and its mismatch (n) too.
+        ``unknown``: how many more
         APs each scan heard that the model does not know (default none;
         :func:`.evaluation.unknown_aps`).
 
@@ -175,19 +176,20 @@ class PlaceModel:
         best = proba.argmax(axis=1)
         xy = np.empty((len(best), 2))
         sigma, covered = np.empty(len(best)), np.full(len(best), np.nan)
+        mismatch = np.empty(len(best))
         unknown = np.zeros(len(best), np.int64) if unknown is None else \
             np.asarray(unknown, np.int64)
         for i, (row, c) in enumerate(zip(np.asarray(rssi, np.float32), best)):
             columns = np.flatnonzero(~np.isnan(row))
-            xy[i], circle, p, knn = self.locate(columns, row[columns], c,
-                                                int(unknown[i]), coverage)
+            xy[i], circle, p, knn, mismatch[i] = self.locate(
+                columns, row[columns], c, int(unknown[i]), coverage)
             sigma[i] = circle if widened else knn
             covered[i] = np.nan if p is None else p
-        return (proba, xy, sigma) + ((covered,) if coverage else ())
+        return (proba, xy, sigma) + ((covered, mismatch) if coverage else ())
 
     def locate(self, columns, rssi, c, unknown=0, coverage=True):
         """
-        Return (xy (2,), sigma m, P(covered) or None, k-NN sigma m).
+        Return (xy (2,), sigma m, P(covered) or None, k-NN sigma m, mismatch).
 
         Of one scan of class c: ``sigma`` is its 95 % circle's (widened at
         the survey's edge, :meth:`.locator.Locator.widened`), the k-NN
@@ -195,19 +197,23 @@ class PlaceModel:
         model and their readings (dBm); ``unknown``: how many more it
         heard. The probability is None without a coverage model (or
         ``coverage`` false), and for a scan with no AP the model knows
-        (the node rejects such a scan; offline it is not judged).
+        (the node rejects such a scan; offline it is not judged). The
+        mismatch: how unlike its nearest references it sounds, over the
+        survey's usual (:meth:`.locator.Locator.relative_mismatch`; NaN:
+        not known).
         """
         locator = self.position
         distance = locator.distances(
             columns, signal(rssi, locator.representation), c)
         xy, knn = locator.weighted(distance, locator.neighbours, c)
         sigma = locator.widened(xy, knn, c)
+        mismatch = locator.relative_mismatch(columns, rssi, c, distance)
         if self.coverage is None or not coverage or not len(columns):
-            return xy, sigma, None, knn
+            return xy, sigma, None, knn, mismatch
         x = features(locator, distance, c,
                      unheard_share(locator, columns, c, unknown))
         return xy, sigma, float(self.coverage.probability(x)) \
-            if np.isfinite(x).all() else None, knn
+            if np.isfinite(x).all() else None, knn, mismatch
 
     @property
     def class_names(self):

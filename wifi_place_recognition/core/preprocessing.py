@@ -28,6 +28,16 @@ def signal(rssi, representation, floor=-110.0):
     return (np.expm1(above / 24) / np.expm1(-floor / 24)).astype(np.float32)
 
 
+def signal_dbm(value, representation, floor=-110.0):
+    """Return the dBm (float64) of :func:`signal` values: its inverse."""
+    value = np.asarray(value, np.float64)
+    if representation == 'positive':
+        return floor + value
+    if representation == 'powed':
+        return floor - floor * value ** (1 / np.e)
+    return floor + 24 * np.log1p(value * np.expm1(-floor / 24))
+
+
 class NotFittedError(ValueError, AttributeError):
     """A scaler used before :meth:`RssiScaler.fit`."""
 

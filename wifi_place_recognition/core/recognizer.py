@@ -33,6 +33,7 @@ class Place:
     scan_sigma: float = float('nan')  # m, this scan alone
     coverage: float = None      # P(this scan is where the survey covers)
     scan_knn_sigma: float = float('nan')  # m, before the edge widening
+    mismatch: float = float('nan')  # dB: how unlike its nearest references
 
     @property
     def position_sigma(self):
@@ -105,9 +106,9 @@ class PlaceRecognizer:
         scan_building, scan_floor = (int(v) for v in self.model.classes[best])
         scan_confidence = float(proba[best])
         xy = cov = coverage = None
-        sigma = knn_sigma = float('nan')
+        sigma = knn_sigma = mismatch = float('nan')
         if self.model.position is not None:
-            xy, sigma, coverage, knn_sigma = self.model.locate(
+            xy, sigma, coverage, knn_sigma, mismatch = self.model.locate(
                 columns, scan.rssi, best, scan.unknown)
             cov = np.eye(2) * sigma ** 2
         scan_xy = xy
@@ -134,7 +135,7 @@ class PlaceRecognizer:
         return Place(building, floor, confidence, probabilities, scan.known,
                      scan.unknown, scan.clipped, level, message,
                      scan_building, scan_floor, scan_confidence, xy, cov,
-                     scan_xy, sigma, coverage, knn_sigma)
+                     scan_xy, sigma, coverage, knn_sigma, mismatch)
 
 
 def step_sigmas(before_xy, before_cov, after_xy):

@@ -81,7 +81,7 @@ def with_references(model, parts, base):
     position = Locator.build(np.concatenate(rssi), y, np.concatenate(xy),
                              len(model.classes), old.neighbours, old.sigma,
                              old.columns, old.representation, old.metric,
-                             old.group, old.edge_sigma)
+                             old.group, old.edge_sigma, old.usual_mismatch)
     provenance = copy.deepcopy(model.provenance)
     provenance[PROVENANCE] = {
         'kind': 'references only: the network, its APs, temperature, '

@@ -235,7 +235,7 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
         error[calibrating],
         np.concatenate(nearest[rep, metric, scope])[calibrating],
         np.concatenate(predicted)[calibrating], n_classes)
-    examples, circle = _held_out_answers(
+    examples, circle, mismatch = _held_out_answers(
         splits, predicted, n_classes, (rep, metric, scope), k, sigma)
     off = np.isfinite(circle[0]) & ~examples[1]
     which = 'off the survey'
@@ -244,6 +244,9 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
     edge = calibrated_edge_sigma(*circle[:, off])
     log(f'position: an answer at the survey\'s edge widened by {edge:.2f} '
         f'm (calibrated on {int(off.sum())} held-out scans {which})')
+    usual, judged = usual_mismatch(mismatch, examples[1])
+    log(f'position: the usual mismatch on covered ground {usual:.2f} dB '
+        f'(of {judged} held-out scans; 0: too few, not known)')
     return {'neighbours': k, 'position_representation': rep,
             'position_metric': metric, 'position_scope': scope,
             'position_mean_error_m': mean[best],
@@ -251,6 +254,7 @@ def _cross_validate_position(splits, predicted, n_classes, config, log):
             'sigma_calibration_scans': int(calibrating.sum()),
             'sigma_m': sigma.tolist(), 'edge_sigma_m': edge,
             'edge_calibration_scans': int(off.sum()),
+            'usual_mismatch_db': usual, 'usual_mismatch_scans': judged,
             COVERAGE_EXAMPLES: examples}
 
 
@@ -266,11 +270,12 @@ def _held_out_answers(splits, predicted, n_classes, space, k, sigma):
     Each held-out scan placed among the kept scans of its fold, in the
     chosen space, with the calibrated sigma: (features, covered, fold)
     of every one (``features`` of
-    :mod:`wifi_place_recognition.core.coverage`), and the rows error (m),
-    sigma (m) and one-sidedness of its answer (NaN where none).
+    :mod:`wifi_place_recognition.core.coverage`), the rows error (m),
+    sigma (m) and one-sidedness of its answer (NaN where none), and its
+    mismatch (dB, :meth:`.locator.Locator.mismatch`).
     """
     rep, metric, scope = space
-    x, covered, fold, circle = [], [], [], []
+    x, covered, fold, circle, mismatch = [], [], [], [], []
     for f, (split, classes) in enumerate(zip(splits, predicted)):
         keep = split.keep
         locator = Locator.build(
@@ -286,10 +291,26 @@ def _held_out_answers(splits, predicted, n_classes, space, k, sigma):
             xy, scan_sigma = locator.weighted(distance, k, c)
             circle.append((float(np.linalg.norm(xy - truth)), scan_sigma,
                            locator.one_sidedness(xy, c)))
+            mismatch.append(locator.mismatch(cols, rssi[cols], c, distance))
         covered.append(_covered(split))
         fold.append(np.full(len(split.held_y), f))
     return ((np.array(x), np.concatenate(covered), np.concatenate(fold)),
-            np.array(circle, np.float64).reshape(-1, 3).T)
+            np.array(circle, np.float64).reshape(-1, 3).T,
+            np.array(mismatch, np.float64))
+
+
+def usual_mismatch(mismatch, covered):
+    """
+    Return (the usual mismatch dB, of how many held-out scans).
+
+    The median mismatch of the held-out scans on covered ground; 0 when
+    fewer than :data:`MIN_COVERED` have one (not known: the filter then
+    does not weigh scans by it).
+    """
+    judged = np.isfinite(mismatch) & np.asarray(covered, bool)
+    if judged.sum() < MIN_COVERED:
+        return 0.0, int(judged.sum())
+    return float(np.median(mismatch[judged])), int(judged.sum())
 
 
 #: The sigma is calibrated on held-out scans taken within COVERED_M of a
@@ -333,7 +354,8 @@ def reference_locator(fp, y, n_classes, selection):
                          selection['position_metric'],
                          _groups(fp, y, n_classes,
                                  selection['position_scope']),
-                         selection['edge_sigma_m'])
+                         selection['edge_sigma_m'],
+                         selection['usual_mismatch_db'])
 
 
 #: The temperatures :func:`fit_temperature` chooses from (bounds): it

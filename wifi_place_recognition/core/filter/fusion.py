@@ -27,12 +27,15 @@ lacks. Two confident scans in a row of another building/floor restart
 the filter there (a lift); a scan of another place is otherwise not
 applied, and gets the current pose. Each scan is weighed as far as it is
 trusted: its misfit to odometry over the last seconds
-(:class:`.track_misfit.TrackMisfit`) widens it; the scans it widened are
-counted (``scans_off_track``). When the scans keep disagreeing with the
-particles (a kidnapped robot: :meth:`.particles.ParticleFilter.update`),
-the filter starts afresh at the first of those scans and applies them
-again with the odometry between them (when each of them was applied with
-odometry): it restarts with their evidence, not one scan's.
+(:class:`.track_misfit.TrackMisfit`) widens it (the scans it widened are
+counted: ``scans_off_track``), and so does the recent scans' mismatch
+with the survey (:class:`.mismatch.RecentMismatch`; the scans widened
+more than halfway: ``scans_unlike_survey``). When the scans keep
+disagreeing with the particles (a kidnapped robot:
+:meth:`.particles.ParticleFilter.update`), the filter starts afresh at
+the first of those scans and applies them again with the odometry
+between them (when each of them was applied with odometry): it restarts
+with their evidence, not one scan's.
 A pose dragged aside by scans from a place the survey took for another
 is moved back to a past pose of the filter carried forward by odometry
 once the recent scans agree with that one and not with it
@@ -54,6 +57,7 @@ import numpy as np
 from ..place_switch import PlaceSwitch
 from .angles import wrap
 from .hindsight import Hindsight
+from .mismatch import RecentMismatch
 from .particles import DISAGREED, ParticleFilter, UNKNOWN_VARIANCE
 from .pose_spread import ScanOffsets
 from .track_misfit import TrackMisfit
@@ -134,6 +138,7 @@ class Fusion:
         self.switch = PlaceSwitch()
         self.misfit = TrackMisfit(self.filter.params.track_s)
         self.offsets = ScanOffsets(self.filter.params.pose_scans)
+        self.mismatch = RecentMismatch(self.filter.params.mismatch_scans)
         self.hindsight = Hindsight(self.filter.params, self.filter.motion)
         self.limits = limits or FusionLimits()
         self.counts = Counter()
@@ -143,7 +148,8 @@ class Fusion:
         """Forget everything but the counts: the next scan starts afresh."""
         self.odom = deque(maxlen=self.limits.history)  # (t, x, y, yaw)
         self.pending = []       # (stamp, xy, place or None: not applied,
-        #                         arrival, sigma, coverage), in stamp order
+        #                         arrival, sigma, coverage, mismatch), in
+        #                         stamp order
         self.anchor = None      # the odometry pose the particles are at
         self.set_at = None      # a set pose's stamp, waiting for odometry
         self.place = None
@@ -153,11 +159,13 @@ class Fusion:
         self.misfit.clear()     # the recent scans' track
         self.offsets.clear()    # the recent scans' offsets from the pose
         self.hindsight.clear()  # the filter's past poses
+        self.mismatch.clear()   # the recent scans' mismatch
         self.spread = 0.0       # the particles' variance at the last scan
         self.applied = deque(maxlen=self.filter.params.reset_after)
         #                         the last scans applied with odometry since
         #                         the filter started, for a restart: (stamp,
-        #                         xy, sigma, coverage, odometry pose)
+        #                         xy, sigma, coverage, recent mismatch,
+        #                         odometry pose)
 
     def set_pose(self, stamp, xy, yaw, sd, yaw_sd, place):
         """
@@ -260,7 +268,7 @@ class Fusion:
             self.anchor = pose
 
     def scan(self, stamp, xy, place, confident=True, arrival=None,
-             sigma=None, coverage=None):
+             sigma=None, coverage=None, mismatch=None):
         """
         Take one scan's answer; return the fused poses now available.
 
@@ -270,8 +278,10 @@ class Fusion:
         ``arrival``: when it arrived, on the clock :meth:`expire` is given
         (default: its stamp). ``sigma``: the scan's own (m; None: not
         known); ``coverage``: P(taken where the survey covers; None: not
-        known). A scan without a finite position is refused (counted,
-        None returned).
+        known); ``mismatch``: how unlike its nearest references it sounds,
+        over the survey's usual (:meth:`.locator.Locator.relative_mismatch`;
+        None or NaN: not known). A scan
+        without a finite position is refused (counted, None returned).
         """
         xy = np.asarray(xy, np.float64)
         if not (xy.shape == (2,) and np.isfinite(xy).all() and
@@ -285,7 +295,7 @@ class Fusion:
             not moved
         self.pending.append((float(stamp), xy, place if apply else None,
                              float(stamp if arrival is None else arrival),
-                             sigma, coverage))
+                             sigma, coverage, mismatch))
         self.pending.sort(key=lambda item: item[0])
         return self._advance()
 
@@ -347,7 +357,7 @@ class Fusion:
 
     def _apply(self, scan, odometry):
         """Apply one pending scan (place None: only move to it); its pose."""
-        stamp, xy, place, _, sigma, coverage = scan
+        stamp, xy, place, _, sigma, coverage, mismatch = scan
         if place is None and not self.filter.started:
             return None
         self.set_at = None      # a scan anchors the particles from now on
@@ -385,10 +395,14 @@ class Fusion:
             misfit = self.misfit.add(stamp, xy, at[1:3]) if odometry \
                 else None
             sensor = self.filter.sensor
-            scan = sensor.measurement(xy, sigma, misfit, coverage)
+            recent = self.mismatch.add(mismatch)
+            scan = sensor.measurement(xy, sigma, misfit, coverage, recent)
             self.counts['scans_off_track'] += sensor.off_track(scan)
+            self.counts['scans_unlike_survey'] += \
+                sensor.sounds_like_survey(scan) < 0.5
             if odometry:
-                self.applied.append((stamp, xy, sigma, coverage, at))
+                self.applied.append((stamp, xy, sigma, coverage, recent,
+                                     at))
             before = self.filter.estimate().xy if \
                 self.hindsight.stamps.size else None
             why = self.filter.update(scan)
@@ -456,16 +470,16 @@ class Fusion:
         """
         Start afresh at the first scan kept, and apply them all again.
 
-        Each with its position, sigma and coverage, and its misfit on the
-        new track; the particles moved by the odometry between them, and
-        on to where the particles were (:attr:`anchor`).
+        Each with its position, sigma, coverage and mismatch, and its
+        misfit on the new track; the particles moved by the odometry
+        between them, and on to where the particles were (:attr:`anchor`).
         """
         sensor = self.filter.sensor
         self.misfit.clear()
         before = None
-        for stamp, xy, sigma, coverage, at in self.applied:
+        for stamp, xy, sigma, coverage, recent, at in self.applied:
             misfit = self.misfit.add(stamp, xy, at[1:3])
-            scan = sensor.measurement(xy, sigma, misfit, coverage)
+            scan = sensor.measurement(xy, sigma, misfit, coverage, recent)
             if before is None:
                 self.filter.start(sensor.centre(scan))
             else:

@@ -40,7 +40,8 @@ class FusionParams(SectionParams):
 
     SECTION = 'fusion'
     POSITIVE = ('particles', 'wifi_sd', 'wifi_outlier', 'start_sd',
-                'reset_sigmas', 'reset_after', 'track_s', 'hindsight_m')
+                'reset_sigmas', 'reset_after', 'track_s', 'hindsight_m',
+                'mismatch_width')
     SIGNED = ('drift_mean',)
 
     particles: int = 3000
@@ -57,6 +58,13 @@ class FusionParams(SectionParams):
     wifi_outlier: float = 0.5         # likelihood floor (share of the peak)
     coverage_full: float = 0.0        # P(covered) from which a scan counts
     #                                   fully (0: every scan, coverage unused)
+    mismatch_scans: int = 5           # recent scans' mismatch averaged (0:
+    #                                   mismatch unused; .mismatch)
+    mismatch_full: float = 1.1        # scans as wide as wifi_sd up to this
+    #                                   many times the survey's usual
+    #                                   mismatch ...
+    mismatch_none: float = 1.6        # ... and mismatch_width from this many
+    mismatch_width: float = 16.0      # m
     start_sd: float = 3.0             # m: spread of a start around a scan
     reset_sigmas: float = 3.0         # a scan this many sd off disagrees
     reset_track_sigmas: float = 0.0   # one its misfit did not widen: from
@@ -78,7 +86,8 @@ class FusionParams(SectionParams):
         """Refuse values that would make the filter meaningless."""
         super().__post_init__()
         for name, top in (('particles', 10 ** 6), ('reset_after', 10 ** 6),
-                          ('pose_scans', 10 ** 4)):
+                          ('pose_scans', 10 ** 4),
+                          ('mismatch_scans', 10 ** 4)):
             value = getattr(self, name)
             if value != int(value) or value > top:
                 raise ValueError(f'fusion parameter {name} = {value!r}: '
@@ -86,6 +95,11 @@ class FusionParams(SectionParams):
         if self.coverage_full > 1:
             raise ValueError(f'fusion parameter coverage_full = '
                              f'{self.coverage_full!r}: expected 0 to 1')
+        if not self.mismatch_none > self.mismatch_full > 0:
+            raise ValueError(f'fusion parameters mismatch_full = '
+                             f'{self.mismatch_full!r}, mismatch_none = '
+                             f'{self.mismatch_none!r}: expected 0 < '
+                             f'mismatch_full < mismatch_none')
         if self.wifi_outlier >= 1:
             raise ValueError(f'fusion parameter wifi_outlier = '
                              f'{self.wifi_outlier!r}: expected < 1')

@@ -5,8 +5,8 @@ The filter's sensor model: a WiFi scan's position, as far as it is trusted.
 sigma, its misfit to odometry); :class:`WifiSensorModel` weighs particles
 by it. Another model (e.g. a per-AP radio map) brings its own measurement
 type and the same methods: ``measurement`` (from a scan's answer),
-``off_track``, ``centre``, ``trust``, ``testifies``, ``disagrees``,
-``likelihood``.
+``off_track``, ``centre``, ``trust``, ``sounds_like_survey``,
+``testifies``, ``disagrees``, ``likelihood``.
 """
 
 from dataclasses import dataclass, replace
@@ -23,6 +23,8 @@ class WifiPosition:
     sigma: float = None        # m: the scan's own (None: not known)
     misfit: float = None       # m: the recent scans' (:class:`TrackMisfit`)
     coverage: float = None     # P(taken where the survey covers); None: 1
+    mismatch: float = None     # the recent scans' mismatch over the
+    #                            survey's usual (.mismatch); None: not known
 
     @property
     def covered(self):
@@ -44,10 +46,15 @@ class WifiSensorModel:
     survey has no scan, the k-NN snaps to the nearest surveyed stretch
     for as long as the robot is away from it, its errors along the run are
     not independent, and scans that move unlike the robot are trusted
-    less, so the pose follows odometry there. With ``coverage_full`` > 0
-    a scan counts as far as it was likely taken where the survey covers
-    (its ``coverage``): one likely off the survey moves the particles
-    little and never counts towards a restart.
+    less, so the pose follows odometry there. So are scans while the
+    recent ones sound unlike the survey (their ``mismatch``): as wide as
+    ``wifi_sd`` up to ``mismatch_full`` times the survey's usual, and
+    ``mismatch_width`` from ``mismatch_none`` times; they still hold the
+    particles together, a hole's scans lying near where the robot is.
+    With ``coverage_full`` > 0 a scan counts as far as it was likely
+    taken where the survey covers (its ``coverage``): one likely off the
+    survey moves the particles little and never counts towards a
+    restart.
     """
 
     def __init__(self, params):
@@ -61,11 +68,13 @@ class WifiSensorModel:
             width = max(width, p.sigma_scale * scan.sigma)
         if scan.misfit is not None:
             width = max(width, p.track_scale * scan.misfit)
-        return width
+        unlike = 1.0 - self.sounds_like_survey(scan)
+        return max(width,
+                   p.wifi_sd + unlike * (p.mismatch_width - p.wifi_sd))
 
-    def measurement(self, xy, sigma, misfit, coverage=None):
+    def measurement(self, xy, sigma, misfit, coverage=None, mismatch=None):
         """Return the :class:`WifiPosition` of a scan's answer."""
-        return WifiPosition(xy, sigma, misfit, coverage)
+        return WifiPosition(xy, sigma, misfit, coverage, mismatch)
 
     def off_track(self, scan):
         """Return True when the scan's misfit widened it."""
@@ -109,6 +118,19 @@ class WifiSensorModel:
         """
         full = self.params.coverage_full
         return 1.0 if not full else min(scan.covered / full, 1.0)
+
+    def sounds_like_survey(self, scan):
+        """
+        Return how much ``scan``'s recent mismatch sounds like the survey.
+
+        1 up to ``mismatch_full`` times the usual, 0 from ``mismatch_none``
+        times, linear between; 1 when not known or ``mismatch_scans`` is 0.
+        """
+        p = self.params
+        if not p.mismatch_scans or scan.mismatch is None:
+            return 1.0
+        return min(max((p.mismatch_none - scan.mismatch) /
+                       (p.mismatch_none - p.mismatch_full), 0.0), 1.0)
 
     def testifies(self, scan):
         """Return True when ``scan`` counts at least half (covered ground)."""

@@ -31,8 +31,8 @@ def fuse_offline(odometry, scans, fusion=None):
     Return the node's pose at every scan: (xy (n, 2), yaw (n,), cov (n, 3, 3)).
 
     ``odometry``: (m, 4) rows of stamp, x, y, yaw; ``scans``: stamps (n,),
-    xy (n, 2), optionally each scan's sigma (n,) and coverage (n,), in
-    stamp order. They go through the node's
+    xy (n, 2), optionally each scan's sigma (n,), coverage (n,) and
+    mismatch (dB, n), in stamp order. They go through the node's
     :class:`.scan_pipeline.ScanPipeline` (each scan a confident answer of
     one place, :func:`.scan_pipeline.position_answer`) as the node would
     receive them, on the stamps' clock: each message arrives at its stamp
@@ -46,6 +46,7 @@ def fuse_offline(odometry, scans, fusion=None):
     stamps, xy = scans[:2]
     sigma = scans[2] if len(scans) > 2 else np.full(len(stamps), np.nan)
     coverage = scans[3] if len(scans) > 3 else [None] * len(stamps)
+    mismatch = scans[4] if len(scans) > 4 else np.full(len(stamps), np.nan)
     n = len(stamps)
     out_xy, out_yaw = np.full((n, 2), np.nan), np.full(n, np.nan)
     out_cov = np.full((n, 3, 3), np.nan)
@@ -70,7 +71,8 @@ def fuse_offline(odometry, scans, fusion=None):
             arrive(odometry[o])
             o += 1
         keep(pipeline.answer(position_answer(xy[i], sigma[i],
-                                             coverage=coverage[i]),
+                                             coverage=coverage[i],
+                                             mismatch=mismatch[i]),
                              stamps[i], stamps[i], i))
     for row in odometry[o:]:
         arrive(row)

@@ -32,6 +32,7 @@ HEALTH_NAMES = {'odometry': 'odometry_received',
                 'scans_other_place': 'fusion_scans_other_place',
                 'scans_late': 'fusion_scans_late',
                 'scans_off_track': 'fusion_scans_off_track',
+                'scans_unlike_survey': 'fusion_scans_unlike_survey',
                 'scans_without_position': 'fusion_scans_without_position',
                 'restarts': 'fusion_restarts',
                 'scans_replayed': 'fusion_scans_replayed',
@@ -127,7 +128,8 @@ class FusionStage:
         released = self.fusion.scan(
             stamp, answer.scan_position, place, confident,
             now - 2 * timeout if stale else now,    # stale: no waiting
-            answer.scan_sigma, coverage=getattr(answer, 'coverage', None))
+            answer.scan_sigma, coverage=getattr(answer, 'coverage', None),
+            mismatch=getattr(answer, 'mismatch', None))
         if released is None:
             del self._sources[stamp]
             self._problem('a scan without a finite position: not fused', now,

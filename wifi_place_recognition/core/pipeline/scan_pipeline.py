@@ -275,15 +275,18 @@ def swap_problem(running, model):
             f'{this}: restart the node to change that')
 
 
-def position_answer(xy, sigma=math.nan, place=(0, 0), coverage=None):
+def position_answer(xy, sigma=math.nan, place=(0, 0), coverage=None,
+                    mismatch=math.nan):
     """
     Return a confident answer at ``xy`` (m) with ``sigma`` (m) on ``place``.
 
     A position known without recognising a scan (a batch forward pass
     offline) as :meth:`ScanPipeline.answer` takes it; ``coverage``: its
-    probability of lying where the survey covers (None: not known).
+    probability of lying where the survey covers (None: not known);
+    ``mismatch``: how unlike its nearest references it sounds (dB; NaN:
+    not known).
     """
     xy = np.asarray(xy, np.float64)
     return Place(place[0], place[1], 1.0, np.ones(1), 0, 0, 0, OK, '',
                  place[0], place[1], 1.0, xy, np.eye(2) * sigma ** 2, xy,
-                 sigma, coverage)
+                 sigma, coverage, mismatch=mismatch)
