@@ -36,10 +36,10 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
     #                                   two answered at the hole's edges
     with running_node(ros, tmp_path, model_path, 'coverage_node') as (
             client, proc, model):
-        _, _, sigma, expected, _ = model.predict_positions(
+        _, _, sigma, expected, mismatch = model.predict_positions(
             align(model, fp), coverage=True)
         narrow = model.predict_positions(align(model, fp), widened=False)[2]
-        got, sigmas, knn = [], [], []
+        got, sigmas, knn, sounds = [], [], [], []
         for row in rows:
             detected = np.flatnonzero(np.isfinite(fp.rssi[row]))
             status = client.resend_until_answered(client.scan(
@@ -50,6 +50,10 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
             got.append(float(values['coverage']))
             sigmas.append(float(values['scan_sigma_m']))
             knn.append(float(values['scan_knn_sigma_m']))
+            sounds.append(float(values['mismatch']))
+        # the mismatch over the survey's usual, as offline (the filter's)
+        np.testing.assert_allclose(sounds, mismatch[rows], atol=1e-3)
+        assert model.position.usual_mismatch > 0
         # exact, not rounded (the monitor's 0.5 rule decides on them)
         np.testing.assert_allclose(got, expected[rows], rtol=1e-6, atol=0)
         assert all(0.0 <= p <= 1.0 for p in got)

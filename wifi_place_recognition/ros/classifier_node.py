@@ -329,7 +329,8 @@ class ClassifierNode(Node):
                 # value just past its threshold is not rounded onto it
                 _kv('scan_knn_sigma_m', repr(float(place.scan_knn_sigma))),
                 _kv('coverage', 'nan' if place.coverage is None else
-                    repr(float(place.coverage)))]
+                    repr(float(place.coverage))),
+                _kv('mismatch', f'{place.mismatch:.3f}')]
 
     def _frame(self, place):
         """Return the frame of ``place`` (building, floor)."""
