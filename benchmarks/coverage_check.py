@@ -76,13 +76,20 @@ def at_prior(p, report, floor=None):
     return 1 / (1 + np.exp(-z))
 
 
-def check(model, train, test):
-    """Return the coverage model's figures on ``test`` (dict)."""
-    p = scan_answers(model, test)[3]
-    place = np.column_stack([test.building, test.floor])
-    covered = distance_by_place(
-        test.position, place, train.position,
+def covered_truth(train, test):
+    """Return which test scans lie within COVERED_M of a training scan."""
+    return distance_by_place(
+        test.position, np.column_stack([test.building, test.floor]),
+        train.position,
         np.column_stack([train.building, train.floor])) <= COVERED_M
+
+
+def check(model, p, covered):
+    """
+    Return the coverage model's figures (dict).
+
+    ``p``: its probability of each test scan; ``covered``: the truth.
+    """
     judged = np.isfinite(p)
     table, ece = reliability(p[judged], covered[judged])
     off = uncovered(p)
@@ -94,7 +101,7 @@ def check(model, train, test):
                 'judged_off_share': float(
                     (uncovered(q).sum() + (~judged).sum()) / len(p))}
     return {
-        'test_scans': len(test), 'judged': int(judged.sum()),
+        'test_scans': len(p), 'judged': int(judged.sum()),
         'covered_share': float(covered.mean()),
         'auc': _finite(auc(p[judged], covered[judged])), 'ece': ece,
         'mean_probability': float(p[judged].mean()),
@@ -111,16 +118,15 @@ def check(model, train, test):
                    for f in FLOORS}}
 
 
-def mismatch(model, train, test):
-    """Return how the test file's scans sound against the usual (dict)."""
-    usual = model.position.usual_mismatch
+def mismatch(usual, ratio, covered):
+    """
+    Return how the test file's scans sound against the usual (dict).
+
+    ``usual``: the model's usual mismatch (dB; 0: none); ``ratio``: each
+    test scan's mismatch over it; ``covered``: the truth.
+    """
     if not usual:
         return {'usual_mismatch_db': 0.0, 'note': 'not known'}
-    ratio = scan_answers(model, test)[4]
-    place = np.column_stack([test.building, test.floor])
-    covered = distance_by_place(
-        test.position, place, train.position,
-        np.column_stack([train.building, train.floor])) <= COVERED_M
     known = np.isfinite(ratio)
     on, off = known & covered, known & ~covered
     return {'usual_mismatch_db': usual,
@@ -210,7 +216,10 @@ def main():
             files, train, test = _data(args.datasets_root, name, holes,
                                        folder)
             model, basis = _model(name, files, folder)
-            sound = mismatch(model, train, test)
+            answers = scan_answers(model, test)
+            truth = covered_truth(train, test)
+            sound = mismatch(model.position.usual_mismatch, answers[4],
+                             truth)
             print(f'{key:16s} mismatch: usual '
                   f'{sound["usual_mismatch_db"]:.2f} dB, covered test '
                   f'scans {_cell(sound.get("covered_over_usual"), ".2f")}'
@@ -221,7 +230,8 @@ def main():
                                 'mismatch': sound}
                 print(f'{key:16s} no coverage model')
                 continue
-            r = results[key] = {'model': basis, **check(model, train, test),
+            r = results[key] = {'model': basis,
+                                **check(model, answers[3], truth),
                                 'mismatch': sound}
             print(f'{key:16s} {r["test_scans"]:6d} '
                   f'{r["covered_share"]:8.3f} {_cell(r["auc"]):>6s} '

@@ -472,3 +472,5 @@ def test_the_usual_mismatch_is_the_covered_held_out_scans_median():
     assert usual_mismatch(mismatch, covered) == (2.0, 30)
     # fewer than 30: not known
     assert usual_mismatch(mismatch[:45], covered[:45]) == (0.0, 27)
+    # held-out scans that repeat the kept ones: at least 2 dB
+    assert usual_mismatch(mismatch / 10, covered) == (2.0, 30)

@@ -36,11 +36,12 @@ def unknown_aps(onto, fp):
 
 def scan_answers(model, fp, widened=True):
     """
-    Return (probabilities, xy, sigma, coverage) of each scan, as the node.
+    Return (probabilities, xy, sigma, coverage, mismatch) of each scan.
 
-    :meth:`.model.PlaceModel.predict_positions` of the rows :func:`align`
-    maps, the APs the model lacks counted (:func:`unknown_aps`); with
-    ``widened`` false the k-NN's sigma, not the 95 % circle's.
+    As the node answers them: :meth:`.model.PlaceModel.predict_positions`
+    of the rows :func:`align` maps, the APs the model lacks counted
+    (:func:`unknown_aps`); with ``widened`` false the k-NN's sigma, not
+    the 95 % circle's; the mismatch over the survey's usual.
     """
     return model.predict_positions(align(model, fp), coverage=True,
                                    widened=widened,
