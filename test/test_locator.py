@@ -127,34 +127,24 @@ def test_locator_in_the_model_file_and_tampered_indices(synthetic,
         save_unchecked(replace(model, position=bad), tmp_path / 'bad.npz')
         with pytest.raises(ModelFileError, match=message):
             load_model(tmp_path / 'bad.npz')
-    # The circle's widening is kept; a file without one (older) has none.
-    model.position.edge_sigma = 2.5
-    save_model(model, tmp_path / 'm.npz')
-    assert load_model(tmp_path / 'm.npz').position.edge_sigma == 2.5
-    _rewrite_header(tmp_path / 'm.npz',
-                    lambda h: h['position'].pop('edge_sigma_m'))
-    assert load_model(tmp_path / 'm.npz').position.edge_sigma == 0.0
-    for value in (-1.0, MAX_EDGE_SIGMA_M + 1, float('nan'), 'wide', True):
-        bad = replace(model.position)
-        object.__setattr__(bad, 'edge_sigma', value)  # past its own check
-        save_unchecked(replace(model, position=bad), tmp_path / 'bad.npz')
-        with pytest.raises(ModelFileError,
-                           match='edge_sigma_m must be a number'):
-            load_model(tmp_path / 'bad.npz')
-    # So is the usual mismatch; a file without one (older) has none.
-    model.position.usual_mismatch = 3.5
-    save_model(model, tmp_path / 'm.npz')
-    assert load_model(tmp_path / 'm.npz').position.usual_mismatch == 3.5
-    _rewrite_header(tmp_path / 'm.npz',
-                    lambda h: h['position'].pop('usual_mismatch_db'))
-    assert load_model(tmp_path / 'm.npz').position.usual_mismatch == 0.0
-    for value in (-1.0, MAX_MISMATCH_DB + 1, float('nan'), 'loud', True):
-        bad = replace(model.position)
-        object.__setattr__(bad, 'usual_mismatch', value)
-        save_unchecked(replace(model, position=bad), tmp_path / 'bad.npz')
-        with pytest.raises(ModelFileError,
-                           match='usual_mismatch_db must be a number'):
-            load_model(tmp_path / 'bad.npz')
+    # The circle's widening and the usual mismatch are kept; a file
+    # without them (older) has none.
+    for name, key, top, kept in (
+            ('edge_sigma', 'edge_sigma_m', MAX_EDGE_SIGMA_M, 2.5),
+            ('usual_mismatch', 'usual_mismatch_db', MAX_MISMATCH_DB, 3.5)):
+        setattr(model.position, name, kept)
+        save_model(model, tmp_path / 'm.npz')
+        assert getattr(load_model(tmp_path / 'm.npz').position, name) == kept
+        _rewrite_header(tmp_path / 'm.npz',
+                        lambda h: h['position'].pop(key))
+        assert getattr(load_model(tmp_path / 'm.npz').position, name) == 0.0
+        for value in (-1.0, top + 1, float('nan'), 'wide', True):
+            bad = replace(model.position)
+            object.__setattr__(bad, name, value)  # past its own check
+            save_unchecked(replace(model, position=bad), tmp_path / 'bad.npz')
+            with pytest.raises(ModelFileError,
+                               match=f'{key} must be a number'):
+                load_model(tmp_path / 'bad.npz')
     with pytest.raises(ValueError, match='usual_mismatch must be in'):
         replace(model.position, usual_mismatch=-2.0)
     bad = replace(model.position)

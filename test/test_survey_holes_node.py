@@ -67,7 +67,7 @@ def twin(since, x, y):
 
 def drive_with_holes(drive, truth, odometry, where, every=10):
     """
-    Drive ``truth``; return (true xy, fused xy, fused sd, kind) per scan.
+    Drive ``truth``; return arrays of true xy, fused xy, fused sd, kind.
 
     Each scan is taken where ``where(since, x, y)`` says: (x, y, kind).
     """
@@ -84,7 +84,7 @@ def drive_with_holes(drive, truth, odometry, where, every=10):
         cov = np.array(pose.pose.covariance).reshape(6, 6)
         out.append(((x + ORIGIN[0], y + ORIGIN[1]), (p.x, p.y),
                     math.sqrt(cov[0, 0] + cov[1, 1]), kind))
-    return out
+    return tuple(np.array(column) for column in zip(*out))
 
 
 def test_the_pose_follows_odometry_where_the_survey_has_no_scan(
@@ -94,13 +94,8 @@ def test_the_pose_follows_odometry_where_the_survey_has_no_scan(
         drive = Drive(ros, client, 'holes_node')
         truth = square(laps=1.8)
         # odometry without drift: the pose can follow it closely
-        results = drive_with_holes(drive, truth,
-                                   odometry_of(truth, drift=0.0),
-                                   snap_and_jump())
-        true = np.array([r[0] for r in results])
-        fused = np.array([r[1] for r in results])
-        sd = np.array([r[2] for r in results])
-        kind = np.array([r[3] for r in results])
+        true, fused, sd, kind = drive_with_holes(
+            drive, truth, odometry_of(truth, drift=0.0), snap_and_jump())
         error = np.linalg.norm(fused - true, axis=1)
         for k in ('snap', 'jump'):
             assert (kind == k).sum() >= 5, kind
@@ -124,11 +119,8 @@ def test_a_pose_dragged_by_a_twin_corridor_comes_back(
         drive = Drive(ros, client, 'twin_node')
         # 190 s: the heading known before the twin (about 40 s), 70 s after
         truth = square(laps=1.9)
-        results = drive_with_holes(drive, truth,
-                                   odometry_of(truth, drift=0.0), twin)
-        true = np.array([r[0] for r in results])
-        fused = np.array([r[1] for r in results])
-        kind = np.array([r[3] for r in results])
+        true, fused, _, kind = drive_with_holes(
+            drive, truth, odometry_of(truth, drift=0.0), twin)
         error = np.linalg.norm(fused - true, axis=1)
         after = np.flatnonzero(kind == 'twin')[-1] + 1
         assert error[after - 1] > 3.0, error    # dragged
@@ -175,11 +167,9 @@ def test_scans_from_a_survey_hole_are_widened_and_counted(
                       'holed_node', *RELIABLE_ODOM) as (client, proc, _):
         drive = Drive(ros, client, 'holed_node')
         truth = square(laps=1.0)
-        results = drive_with_holes(drive, truth,
-                                   odometry_of(truth, drift=0.0),
-                                   lambda since, x, y: (x, y, ''))
-        true = np.array([r[0] for r in results])
-        fused = np.array([r[1] for r in results])
+        true, fused, _, _ = drive_with_holes(
+            drive, truth, odometry_of(truth, drift=0.0),
+            lambda since, x, y: (x, y, ''))
         at = true - ORIGIN
         hole = (at[:, 0] < 17.0) & (at[:, 1] > 23.0)   # 3 m into it
         error = np.linalg.norm(fused - true, axis=1)

@@ -292,16 +292,9 @@ def _position(header, arrays, n_aps, n_classes):
             spec['metric'] not in METRICS:
         raise ModelFileError(f'position: representation must be one of '
                              f'{SIGNALS} and metric one of {METRICS}')
-    edge = spec.get('edge_sigma_m', 0.0)    # older files: not widened
-    if isinstance(edge, bool) or not isinstance(edge, (int, float)) or \
-            not 0 <= edge <= MAX_EDGE_SIGMA_M:
-        raise ModelFileError(f'position: edge_sigma_m must be a number in '
-                             f'[0, {MAX_EDGE_SIGMA_M:g}], not {edge!r}')
-    usual = spec.get('usual_mismatch_db', 0.0)  # older files: not known
-    if isinstance(usual, bool) or not isinstance(usual, (int, float)) or \
-            not 0 <= usual <= MAX_MISMATCH_DB:
-        raise ModelFileError(f'position: usual_mismatch_db must be a number '
-                             f'in [0, {MAX_MISMATCH_DB:g}], not {usual!r}')
+    # older files: not widened at the edge, no usual mismatch
+    edge = _optional_number(spec, 'edge_sigma_m', MAX_EDGE_SIGMA_M)
+    usual = _optional_number(spec, 'usual_mismatch_db', MAX_MISMATCH_DB)
     a = {name: arrays[f'position.{name}'] for name in LOCATOR_ARRAYS}
     if not all(np.isfinite(v).all() for v in a.values()) or \
             not all((a[i] == np.round(a[i])).all() and (a[i] >= 0).all()
@@ -346,6 +339,16 @@ def _position(header, arrays, n_aps, n_classes):
                    a['sigma'], group, n_aps, k, tuple(columns),
                    spec['representation'], spec['metric'], float(edge),
                    float(usual))
+
+
+def _optional_number(spec, key, top):
+    """Return the position section's ``key`` (0 if absent), in [0, top]."""
+    value = spec.get(key, 0.0)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            not 0 <= value <= top:
+        raise ModelFileError(f'position: {key} must be a number in [0, '
+                             f'{top:g}], not {value!r}')
+    return value
 
 
 def _layers(specs, arrays, n_inputs, n_outputs):

@@ -33,7 +33,8 @@ class Place:
     scan_sigma: float = float('nan')  # m, this scan alone
     coverage: float = None      # P(this scan is where the survey covers)
     scan_knn_sigma: float = float('nan')  # m, before the edge widening
-    mismatch: float = float('nan')  # dB: how unlike its nearest references
+    mismatch: float = float('nan')  # unlike its nearest references, over
+    #                                 the survey's usual (NaN: not known)
 
     @property
     def position_sigma(self):

@@ -283,8 +283,8 @@ def position_answer(xy, sigma=math.nan, place=(0, 0), coverage=None,
     A position known without recognising a scan (a batch forward pass
     offline) as :meth:`ScanPipeline.answer` takes it; ``coverage``: its
     probability of lying where the survey covers (None: not known);
-    ``mismatch``: how unlike its nearest references it sounds (dB; NaN:
-    not known).
+    ``mismatch``: how unlike its nearest references it sounds, over the
+    survey's usual (NaN: not known).
     """
     xy = np.asarray(xy, np.float64)
     return Place(place[0], place[1], 1.0, np.ones(1), 0, 0, 0, OK, '',
