@@ -10,6 +10,7 @@ survey), bad input refused with a reason, and the state:
 agrees only when WiFi compared, cannot tell when nothing was.
 """
 
+from dataclasses import replace
 import math
 
 import numpy as np
@@ -253,6 +254,36 @@ def test_no_seed_from_a_fused_pose_built_on_scans_off_the_survey():
     assert seeds[0].seed.startswith('lost')
 
 
+def test_no_seed_while_the_scans_of_the_last_minute_lie_aside():
+    """
+    A pose dragged by scans off the survey, and coming back.
+
+    For 50 s the scans lie 4.5 m aside of the fused track and the fused
+    pose is wide; then they lie on it and the pose is sure at once (its
+    covariance comes from the last few scans). The start-up seed waits
+    until the scans of the last sure_s (60) seconds lie within sure_sd
+    (2 m) of the track on average: at 84 s, 26 of its 60 scans aside
+    (83 s: 27, 2.02 m). Each scan, half a second after a fused pose, is
+    compared with the track between two.
+    """
+    def seeds(params, aside=4.5):
+        w, out = Witness(params), []
+        for k in range(120):
+            j = w.fused(k, 'map', *truth(k), cov(3.0 if k < 50 else 0.5))
+            if j is not None and j.seed:
+                w.seeded(j.stamp)
+                out.append(j.stamp)
+            w.scan(k + 0.5, 'map', truth(k + 0.5)[0] +
+                   [aside if k < 50 else 0.0, 0.0], 1.0)
+        return out
+
+    p = WitnessParams(holdoff=1000.0)
+    assert p.sure_s == 60
+    assert seeds(p) == [84]
+    assert seeds(p, aside=0.0) == [50]
+    assert seeds(replace(p, sure_s=0.0)) == [50]       # not asked
+
+
 def test_a_seed_not_sent_leaves_a_lost_localiser_lost():
     # initial_pose_on_lost off: the seeds proposed are not sent, so
     # nothing starts the localiser over and the verdict stays lost
@@ -310,6 +341,9 @@ def test_parameters_are_checked_naming_the_field():
         WitnessParams(floor_sd=math.nan)
     with pytest.raises(ValueError, match='max_step = 30.0 must be below'):
         WitnessParams(max_step=30.0, alarm=30.0)
+    assert WitnessParams(sure_s=0).sure_s == 0      # 0: not asked
+    with pytest.raises(ValueError, match=r'sure_s = -1: .* number >= 0'):
+        WitnessParams(sure_s=-1)
 
 
 def test_judge_offline_takes_the_streams_in_stamp_order():

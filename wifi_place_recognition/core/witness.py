@@ -50,11 +50,13 @@ the localiser silent) and :data:`LOST`; :attr:`Witness.why` says why.
 
 A pose to seed the localiser with (:attr:`Judgement.seed`,
 :mod:`.witness_seeding`) is the fused pose when it is sure and on the
-survey (not while most recent scans do not testify): at start-up, while
-no localiser message has been heard, and when the localiser is lost. The
-caller says when it sent one (:meth:`Witness.seeded`): the evidence is
-cleared (the localiser starts over) and no other is proposed for
-``holdoff`` seconds.
+survey (not while most recent scans do not testify, nor while the scans
+of the last ``sure_s`` seconds lie on average farther than ``sure_sd``
+from its track: a pose dragged by scans off the survey): at start-up,
+while no localiser message has been heard, and when the localiser is
+lost. The caller says when it sent one (:meth:`Witness.seeded`): the
+evidence is cleared (the localiser starts over) and no other is proposed
+for ``holdoff`` seconds.
 
 Bad localiser poses (:func:`.witness_inputs.pose_problem`: not finite,
 covariance not positive definite; :mod:`.witness_pairing`: stamps going
@@ -160,7 +162,8 @@ class Witness:
         judgement.fused = pose
         if not self._off_survey():
             judgement.seed = self.seeding.propose(
-                pose, self.streams.heard, judgement, self.params)
+                pose, self.streams.heard, judgement, self.params,
+                self.streams.scan_offset)
         self.last = judgement
         return judgement
 
@@ -180,6 +183,7 @@ class Witness:
             return None
         doubt = scan_doubt(sigma, coverage, self.params)
         self.recent.append(not doubt)
+        self.streams.scan(float(stamp), frame, np.asarray(xy, np.float64))
         if not self.streams.due('scans', stamp, self.params.period):
             return None
         self.last = self._judge_scan(float(stamp), frame,

@@ -4,6 +4,10 @@ from dataclasses import dataclass, fields
 import math
 
 
+#: The parameters 0 turns off.
+MAY_BE_ZERO = ('sure_s',)
+
+
 @dataclass(frozen=True)
 class WitnessParams:
     """
@@ -37,17 +41,22 @@ class WitnessParams:
     silent_m: float = 5.0          # m moved with a silent localiser: lost
     sure_sd: float = 2.0           # m: a fused pose this sure may seed
     sure_yaw_sd: float = math.radians(15.0)    # rad, the same for its yaw
+    sure_s: float = 60.0           # s: and the scans of so long lie on
+    #                                average within sure_sd of its track
+    #                                (0: not asked)
     holdoff: float = 30.0          # s between two seeds
 
     def __post_init__(self):
         """Refuse non-finite or non-positive values, naming the field."""
         for f in fields(self):
             value = getattr(self, f.name)
+            least = '>= 0' if f.name in MAY_BE_ZERO else '> 0'
             if isinstance(value, bool) or \
                     not isinstance(value, (int, float)) or \
-                    not math.isfinite(value) or value <= 0:
+                    not math.isfinite(value) or value < 0 or \
+                    (value == 0 and f.name not in MAY_BE_ZERO):
                 raise ValueError(f'witness parameter {f.name} = {value!r}: '
-                                 f'expected a finite number > 0')
+                                 f'expected a finite number {least}')
         if self.max_step >= self.alarm:
             raise ValueError(f'witness parameter max_step = {self.max_step!r}'
                              f' must be below alarm = {self.alarm!r} (one '

@@ -2,10 +2,19 @@
 When the witness proposes a pose to seed the localiser with (ROS-free).
 
 The fused pose, when it is sure (position standard deviation at most
-``sure_sd``, yaw's at most ``sure_yaw_sd``): at start-up, while no
-localiser message has been heard, and when the localiser is lost; at most
-one per ``holdoff`` seconds after one was sent. The witness asks only
-while the fused pose is on the survey (:mod:`.witness`).
+``sure_sd``, yaw's at most ``sure_yaw_sd``, and the scans of the last
+``sure_s`` seconds on average within ``sure_sd`` of its track): at
+start-up, while no localiser message has been heard, and when the
+localiser is lost; at most one per ``holdoff`` seconds after one was
+sent. The witness asks only while the fused pose is on the survey
+(:mod:`.witness`).
+
+The fused covariance comes from the last few scans' offsets. Scans from
+where the survey never went that moved as the robot did drag the pose
+along and hold it together, and once they are good again the pose comes
+back over tens of seconds, metres off with a narrow covariance: the scans
+of the last minute, which include the dragging ones, still lie on average
+metres from its track.
 """
 
 import math
@@ -17,22 +26,30 @@ class Seeding:
     def __init__(self):
         self.last_sent = -math.inf
 
-    def propose(self, pose, heard, judgement, params):
+    def propose(self, pose, heard, judgement, params, scan_offset):
         """
         Return why to send the fused ``pose``, or '' (none).
 
         ``heard``: a localiser message arrived (even a refused one);
-        ``judgement``: the verdict the pose was just judged with.
+        ``judgement``: the verdict the pose was just judged with;
+        ``scan_offset(since, frame)``: how far the scans since then lie
+        from the fused track on average (m; None: no scan), asked last.
         """
         p = params
         sure = pose.sd <= p.sure_sd and pose.yaw_sd <= p.sure_yaw_sd
         if not sure or pose.stamp - self.last_sent < p.holdoff:
             return ''
         if not heard:
-            return 'start-up: no localiser pose yet'
-        if judgement.ok is False:
-            return f'lost: {judgement.reason}'
-        return ''
+            why = 'start-up: no localiser pose yet'
+        elif judgement.ok is False:
+            why = f'lost: {judgement.reason}'
+        else:
+            return ''
+        if p.sure_s:
+            offset = scan_offset(pose.stamp - p.sure_s, pose.frame)
+            if offset is not None and offset > p.sure_sd:
+                return ''
+        return why
 
     def sent(self, stamp):
         """Say that a proposed seed was sent at ``stamp``."""

@@ -9,7 +9,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from std_msgs.msg import Bool, String
 
 from ..core.coverage import OFF_SURVEY_BELOW
-from ..core.witness_params import WitnessParams
+from ..core.witness_params import MAY_BE_ZERO, WitnessParams
 from . import node_interface
 from .node_interface import float_range
 
@@ -88,8 +88,9 @@ PARAMETERS = (
     ('initial_pose_on_lost', False, ParameterDescriptor(
         description='send the fused pose on initialpose at start-up (no '
                     'localiser pose yet) and when the localiser is lost, '
-                    'once the fused pose is sure (sure_sd, sure_yaw_deg), '
-                    'not while most of the last 5 scans do not testify')),
+                    'once the fused pose is sure (sure_sd, sure_yaw_deg, '
+                    'sure_s), not while most of the last 5 scans do not '
+                    'testify')),
     _positive('agree_sigmas', 'a judgement this many standard deviations '
               'apart adds no evidence; farther adds, nearer takes away',
               _D.agree_sigmas, 100.0),
@@ -110,6 +111,10 @@ PARAMETERS = (
               'deviation) may seed the localiser', _D.sure_sd, 100.0),
     _positive('sure_yaw_deg', 'and its yaw this sure (degrees)',
               round(math.degrees(_D.sure_yaw_sd), 6), 180.0),
+    _positive('sure_s', 'and the scans of the last so many seconds lie on '
+              'average within sure_sd of its track (a pose dragged by '
+              'scans off the survey, not yet back, does not; 0: not '
+              'asked)', _D.sure_s, 3600.0),
     _positive('max_age', 'seconds after which a pose is old: the '
               'localiser\'s newest is silent (not compared), and WiFi '
               'cannot tell once its last comparison is this much older '
@@ -124,7 +129,8 @@ WITNESS_FIELDS = {'agree_sigmas': 'agree_sigmas', 'alarm': 'alarm',
                   'floor_sd': 'floor_sd', 'scan_floor_sd': 'scan_floor_sd',
                   'max_scan_sigma': 'max_scan_sigma',
                   'yaw_floor_deg': 'yaw_floor_sd', 'sure_sd': 'sure_sd',
-                  'sure_yaw_deg': 'sure_yaw_sd', 'max_age': 'max_age',
+                  'sure_yaw_deg': 'sure_yaw_sd', 'sure_s': 'sure_s',
+                  'max_age': 'max_age',
                   'silent_m': 'silent_m', 'holdoff': 'holdoff'}
 
 
@@ -144,9 +150,11 @@ def witness_params(values, base=None):
     changes = {}
     for name, value in values.items():
         if name in WITNESS_FIELDS:
-            if not value > 0:       # the ranges take 0
-                raise ValueError(f'{name} = {value!r}: expected a number > 0')
             field = WITNESS_FIELDS[name]
+            off = field in MAY_BE_ZERO
+            if not (value > 0 or off and value == 0):   # the ranges take 0
+                raise ValueError(f'{name} = {value!r}: expected a number '
+                                 f'{">= 0" if off else "> 0"}')
             changes[field] = math.radians(value) if name.endswith('_deg') \
                 else float(value)
     alarm = changes.get('alarm', base.alarm)
