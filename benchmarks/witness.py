@@ -44,14 +44,14 @@ Every building's runs are scored with the node's defaults (any folder of
 runs, one building too: ``fusion.py``'s ``--data``). With two buildings or
 more, the thresholds (agree_sigmas, alarm, floor_sd, max_scan_sigma,
 yaw_floor_sd; then sure_sd, sure_yaw_sd, sure_s) are also chosen on the
-others and reported on each (leave-one-building-out): on b14 for b24 and on b24 for
-b14, never on what is reported. Choice on the tuning building: the fewest
-false alarms, then the fewest flagged inside AMCL's covariance, then the
-fewest missed, then the smallest sum of median and max detection delay
-(each over both surveys, full and holes); for seeding, the fewest
-start-up seeds later than 60 s or off by more than 2 m or 15 deg, then at
-least 90 % of re-seeds that close (both surveys), then the smallest
-start-up delay. Table on stdout, JSON in
+others and reported on each (leave-one-building-out): on b14 for b24 and
+on b24 for b14, never on what is reported. Choice on the tuning building:
+the fewest false alarms, then the fewest flagged inside AMCL's
+covariance, then the fewest missed, then the smallest sum of median and
+max detection delay (each over both surveys, full and holes); for
+seeding, the fewest start-up seeds later than 60 s or off by more than 2
+m or 15 deg, then at least 90 % of re-seeds that close (both surveys),
+then the smallest start-up delay. Table on stdout, JSON in
 ``benchmarks/results/witness.json``.
 
     python benchmarks/witness.py [--data ../shared/datasets/robot]
