@@ -65,12 +65,16 @@ def twin(since, x, y):
     return x, y, ''
 
 
-def drive_with_holes(drive, truth, odometry, where, every=10):
+def drive_with_holes(drive, laps, where, every=10):
     """
-    Drive ``truth``; return arrays of true xy, fused xy, fused sd, kind.
+    Drive the square ``laps`` times; return true xy, fused xy, sd, kind.
 
-    Each scan is taken where ``where(since, x, y)`` says: (x, y, kind).
+    Arrays, one row per scan; odometry without drift (the pose can follow
+    it closely); each scan is taken where ``where(since, x, y)`` says: (x,
+    y, kind).
     """
+    truth = square(laps=laps)
+    odometry = odometry_of(truth, drift=0.0)
     out = []
     for i in range(len(truth)):
         drive.send_odometry(odometry[i])
@@ -92,10 +96,8 @@ def test_the_pose_follows_odometry_where_the_survey_has_no_scan(
     with running_node(ros, tmp_path, surveyed_model,
                       'holes_node', *RELIABLE_ODOM) as (client, proc, _):
         drive = Drive(ros, client, 'holes_node')
-        truth = square(laps=1.8)
-        # odometry without drift: the pose can follow it closely
-        true, fused, sd, kind = drive_with_holes(
-            drive, truth, odometry_of(truth, drift=0.0), snap_and_jump())
+        true, fused, sd, kind = drive_with_holes(drive, 1.8,
+                                                 snap_and_jump())
         error = np.linalg.norm(fused - true, axis=1)
         for k in ('snap', 'jump'):
             assert (kind == k).sum() >= 5, kind
@@ -118,9 +120,7 @@ def test_a_pose_dragged_by_a_twin_corridor_comes_back(
                       'twin_node', *RELIABLE_ODOM) as (client, proc, _):
         drive = Drive(ros, client, 'twin_node')
         # 190 s: the heading known before the twin (about 40 s), 70 s after
-        truth = square(laps=1.9)
-        true, fused, _, kind = drive_with_holes(
-            drive, truth, odometry_of(truth, drift=0.0), twin)
+        true, fused, _, kind = drive_with_holes(drive, 1.9, twin)
         error = np.linalg.norm(fused - true, axis=1)
         after = np.flatnonzero(kind == 'twin')[-1] + 1
         assert error[after - 1] > 3.0, error    # dragged
@@ -166,10 +166,8 @@ def test_scans_from_a_survey_hole_are_widened_and_counted(
     with running_node(ros, tmp_path, holed_model,
                       'holed_node', *RELIABLE_ODOM) as (client, proc, _):
         drive = Drive(ros, client, 'holed_node')
-        truth = square(laps=1.0)
         true, fused, _, _ = drive_with_holes(
-            drive, truth, odometry_of(truth, drift=0.0),
-            lambda since, x, y: (x, y, ''))
+            drive, 1.0, lambda since, x, y: (x, y, ''))
         at = true - ORIGIN
         hole = (at[:, 0] < 17.0) & (at[:, 1] > 23.0)   # 3 m into it
         error = np.linalg.norm(fused - true, axis=1)

@@ -183,12 +183,11 @@ class Witness:
             return None
         doubt = scan_doubt(sigma, coverage, self.params)
         self.recent.append(not doubt)
-        self.streams.scan(float(stamp), frame, np.asarray(xy, np.float64))
+        stamp, xy = float(stamp), np.asarray(xy, np.float64)
+        self.streams.scan(stamp, frame, xy)
         if not self.streams.due('scans', stamp, self.params.period):
             return None
-        self.last = self._judge_scan(float(stamp), frame,
-                                     np.asarray(xy, np.float64), doubt,
-                                     sigma)
+        self.last = self._judge_scan(stamp, frame, xy, doubt, sigma)
         return self.last
 
     def seeded(self, stamp):

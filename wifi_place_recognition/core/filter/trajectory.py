@@ -32,7 +32,7 @@ def fuse_offline(odometry, scans, fusion=None):
 
     ``odometry``: (m, 4) rows of stamp, x, y, yaw; ``scans``: stamps (n,),
     xy (n, 2), optionally each scan's sigma (n,), coverage (n,) and
-    mismatch (dB, n), in stamp order. They go through the node's
+    mismatch over the survey's usual (n,), in stamp order. They go through the node's
     :class:`.scan_pipeline.ScanPipeline` (each scan a confident answer of
     one place, :func:`.scan_pipeline.position_answer`) as the node would
     receive them, on the stamps' clock: each message arrives at its stamp
