@@ -236,17 +236,17 @@ def test_an_odometry_jump_starts_the_scans_track_again():
     assert off[1] <= off[0] + 5, off     # the scans' noise alone: off[0]
 
 
-def test_with_reset_track_sigmas_a_scan_on_track_disagrees_sooner():
+def test_a_scan_on_track_disagrees_sooner():
     """
-    Scans on track disagree from ``reset_track_sigmas`` sd (an option).
+    Scans on track disagree from ``reset_track_sigmas`` sd (2 by default).
 
     A robot carried about a scan's 3 sd (12 m): its scans, once they move
     as odometry says (their misfit widens them no more), disagree from 2
     sd; ten in a row restart the filter there. Scans widened by their
-    misfit (snapped from a hole) still need 3, as every scan does by
-    default (0).
+    misfit (snapped from a hole) still need 3, as every scan does with
+    ``reset_track_sigmas`` 0.
     """
-    params = FusionParams(reset_track_sigmas=2.0)
+    params = FusionParams()
     sensor = WifiSensorModel(params)
     cov = np.eye(2) * 1.0       # the particles: 1 m spread
     on = WifiPosition(np.array([11.0, 0.0]), misfit=1.0)
@@ -256,9 +256,9 @@ def test_with_reset_track_sigmas_a_scan_on_track_disagrees_sooner():
     assert sensor.disagrees(np.zeros(2), cov, on)
     assert not sensor.disagrees(np.zeros(2), cov, off)
     assert not sensor.disagrees(np.zeros(2), cov, unknown)
-    assert FusionParams().reset_track_sigmas == 0
-    assert not WifiSensorModel(FusionParams()).disagrees(np.zeros(2), cov,
-                                                         on)
+    assert params.reset_track_sigmas == 2
+    assert not WifiSensorModel(FusionParams(reset_track_sigmas=0)).disagrees(
+        np.zeros(2), cov, on)
     # within 2 sd (8.2 m here) a scan on track agrees
     assert not sensor.disagrees(np.zeros(2), cov, WifiPosition(
         np.array([7.5, 0.0]), misfit=1.0))

@@ -67,9 +67,8 @@ class FusionParams(SectionParams):
     mismatch_width: float = 16.0      # m
     start_sd: float = 3.0             # m: spread of a start around a scan
     reset_sigmas: float = 3.0         # a scan this many sd off disagrees
-    reset_track_sigmas: float = 0.0   # one its misfit did not widen: from
-    #                                   this many (0: as any, the default;
-    #                                   .sensor)
+    reset_track_sigmas: float = 2.0   # one its misfit did not widen: from
+    #                                   this many (0: as any; .sensor)
     reset_after: int = 10             # so many in a row: start afresh
     idle_speed: float = 0.5           # m/s: spread per second without odometry
     idle_turn_rate: float = 0.5       # rad/s: the same for the heading

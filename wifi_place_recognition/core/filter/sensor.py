@@ -90,12 +90,14 @@ class WifiSensorModel:
 
         ``xy``, ``cov``: the particles' mean position and its covariance.
         With the scan's width before its misfit: scans that jump away from
-        odometry for good (a kidnapped robot) keep disagreeing. With
-        ``reset_track_sigmas`` > 0 a scan whose misfit did not widen it
-        (the recent scans move as odometry says) disagrees from that many
-        sd: a robot carried about a scan's 3 sd (12 m) is found sooner,
-        but so are the scans of a hole beside a parallel surveyed stretch,
-        which move as odometry says too (off by default).
+        odometry for good (a kidnapped robot) keep disagreeing. A scan
+        whose misfit did not widen it (the recent scans move as odometry
+        says) disagrees from ``reset_track_sigmas`` sd (2 by default; 0:
+        as any): a robot carried about a scan's 3 sd (12 m) is found
+        sooner. So would the scans of a hole beside a parallel surveyed
+        stretch, which move as odometry says too, if they sounded like
+        the survey (the mismatch widens them) and fitted odometry within
+        half a scan's width (their misfit widens them otherwise).
         """
         if not self.testifies(scan):
             return False
