@@ -4,7 +4,11 @@ Committed results against what the committed code and model give today.
 ``benchmarks/results/shipped-model-ujiindoorloc-public.json`` is
 ``evaluate_model --json`` of the shipped model on UJIIndoorLoc's public
 test scans (``benchmarks/results/README.md``); the README and the results
-page quote its figures.
+page quote its figures. Another CPU rounds the networks' float32 and the
+k-NN's distances in another order, and a tied neighbour can flip: the
+figures are compared to :data:`REL` (round 26: the position mean error
+6.300 m on the machine that committed it, 6.283 m on an AMD EPYC; every
+count the same).
 """
 
 import json
@@ -14,10 +18,13 @@ import pytest
 
 SHIPPED = REPO / 'benchmarks' / 'results' / \
     'shipped-model-ujiindoorloc-public.json'
+#: Floats agree to this share (a scan's neighbours moving on one of 556
+#: scans moves the mean error by about 0.3 %); whole numbers exactly.
+REL = 5e-3
 
 
 def same(committed, today, where='json'):
-    """Assert ``today`` equals ``committed``: floats to 1e-6 relative."""
+    """Assert ``today`` equals ``committed``: floats to :data:`REL`."""
     if isinstance(committed, dict):
         assert sorted(committed) == sorted(today), where
         for key in committed:
@@ -27,7 +34,7 @@ def same(committed, today, where='json'):
         for i, (a, b) in enumerate(zip(committed, today)):
             same(a, b, f'{where}[{i}]')
     elif isinstance(committed, float):
-        assert today == pytest.approx(committed, rel=1e-6), where
+        assert today == pytest.approx(committed, rel=REL), where
     else:
         assert today == committed, where
 
