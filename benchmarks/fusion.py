@@ -29,8 +29,8 @@ start: 0.5 m and 10 degrees) instead of starting from the first scan
 with every heading. Also: a
 kidnapped robot (two runs spliced, the odometry continuous, the true
 position jumping; each scan's answer whole, its mismatch included, as
-the node's filter takes it) and the recovery time (the error below 2 m for 10 s
-in a row), per survey; on every run, how near the filter came to a
+the node's filter takes it) and the recovery time (the error below 2 m
+for 10 s in a row), per survey; on every run, how near the filter came to a
 restart (the most scans in a row that disagreed); each run's drift over
 stretches of 20 m from its truth (:func:`drift_steadiness`). And leaving
 a hole (:func:`hole_exits`): where the robot comes back to covered

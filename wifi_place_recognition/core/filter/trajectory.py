@@ -32,14 +32,15 @@ def fuse_offline(odometry, scans, fusion=None):
 
     ``odometry``: (m, 4) rows of stamp, x, y, yaw; ``scans``: stamps (n,),
     xy (n, 2), optionally each scan's sigma (n,), coverage (n,) and
-    mismatch over the survey's usual (n,), in stamp order. They go through the node's
-    :class:`.scan_pipeline.ScanPipeline` (each scan a confident answer of
-    one place, :func:`.scan_pipeline.position_answer`) as the node would
-    receive them, on the stamps' clock: each message arrives at its stamp
-    (a scan after odometry of the same stamp), and the node's timer ticks
-    after each odometry pose and once at the end (the scans still waiting
-    go through alone). A scan before any odometry gets its own position
-    (yaw NaN, its variance unknown); NaN where a scan gave no pose.
+    mismatch over the survey's usual (n,), in stamp order. They go through
+    the node's :class:`.scan_pipeline.ScanPipeline` (each scan a confident
+    answer of one place, :func:`.scan_pipeline.position_answer`) as the
+    node would receive them, on the stamps' clock: each message arrives at
+    its stamp (a scan after odometry of the same stamp), and the node's
+    timer ticks after each odometry pose and once at the end (the scans
+    still waiting go through alone). A scan before any odometry gets its
+    own position (yaw NaN, its variance unknown); NaN where a scan gave no
+    pose.
     """
     pipeline = ScanPipeline(fusion=fusion or Fusion())
     pipeline.configure(pose_rate=0)     # the poses at scans only
