@@ -21,7 +21,8 @@ from wifi_place_recognition.core.filter.fusion import Fusion, FusionLimits
 from wifi_place_recognition.core.filter.odometry_fit import (FitError,
                                                              fit_odometry)
 from wifi_place_recognition.core.filter.particles import (
-    FusionParams, ParticleFilter, UNKNOWN_VARIANCE)
+    DISAGREED, FusionParams, ParticleFilter, UNKNOWN_VARIANCE)
+from wifi_place_recognition.core.filter.sensor import WifiPosition
 from wifi_place_recognition.core.filter.pose_spread import SETTLE_SCANS
 from wifi_place_recognition.core.filter.trajectory import (
     dead_reckoning, fuse_offline, odometry_alone, score)
@@ -416,6 +417,34 @@ def test_a_set_pose_starts_the_filter_with_its_heading_carried_by_odometry():
     assert estimate.cov[2, 2] == UNKNOWN_VARIANCE
 
 
+def test_scans_that_keep_disagreeing_restart_the_filter_now_and_then_near():
+    """
+    Scans 20 m off, every third one near: ten of the last thirty restart.
+
+    What a robot carried away sees when its scans are noisy, or some are
+    widened by their misfit or mismatch: a scan now and then near enough
+    does not start the count again (``reset_window``); with a window of
+    ``reset_after`` (ten in a row) they never restart it.
+    """
+    far = WifiPosition(np.array([20.0, 0.0]), misfit=1.0)
+    near = WifiPosition(np.array([1.0, 0.0]), misfit=1.0)
+    scans = [near if i % 3 == 2 else far for i in range(30)]
+
+    def restarts(params):
+        pf = ParticleFilter(params, seed=0)
+        pf.start(np.zeros(2), sd=0.5)
+        why = [pf.update(scan) for scan in scans]
+        return [i for i, w in enumerate(why) if w == DISAGREED], pf
+
+    params = FusionParams()
+    assert params.reset_window == 30 and params.reset_after == 10
+    at, pf = restarts(params)
+    assert at == [13]       # the tenth far scan, the fourteenth
+    assert pf.most_disagreeing == params.reset_after
+    at, pf = restarts(FusionParams(reset_window=10))
+    assert at == [] and pf.most_disagreeing == 7    # of ten, at most
+
+
 def test_a_set_pose_before_any_odometry_is_anchored_at_its_stamp():
     """
     Set at 0 s, odometry from 0 s, the first scan at 2.45 s.
@@ -451,6 +480,9 @@ def test_fusion_parameters_are_checked_and_kept_in_the_model_file(
             FusionParams(pose_scans=bad)
     with pytest.raises(ValueError, match='heading_noise = nan'):
         FusionParams(heading_noise=math.nan)
+    with pytest.raises(ValueError, match='reset_after = 12, reset_window = '
+                       '11: expected reset_window >= reset_after'):
+        FusionParams(reset_after=12, reset_window=11)
     with pytest.raises(ValueError, match='unknown fusion parameter'):
         FusionParams.from_dict({'wifi_sigma': 3})
     model = load_model(surveyed_model)

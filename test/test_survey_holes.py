@@ -242,7 +242,7 @@ def test_a_scan_on_track_disagrees_sooner():
 
     A robot carried about a scan's 3 sd (12 m): its scans, once they move
     as odometry says (their misfit widens them no more), disagree from 2
-    sd; ten in a row restart the filter there. Scans widened by their
+    sd; ten of them restart the filter there. Scans widened by their
     misfit (snapped from a hole) still need 3, as every scan does with
     ``reset_track_sigmas`` 0.
     """

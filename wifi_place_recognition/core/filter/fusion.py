@@ -33,9 +33,9 @@ with the survey (:class:`.mismatch.RecentMismatch`; the scans widened
 more than halfway: ``scans_unlike_survey``). When the scans keep
 disagreeing with the particles (a kidnapped robot:
 :meth:`.particles.ParticleFilter.update`), the filter starts afresh at
-the first of those scans and applies them again with the odometry
-between them (when each of them was applied with odometry): it restarts
-with their evidence, not one scan's.
+the first of the last ``reset_after`` scans and applies them again with
+the odometry between them (when each of them was applied with odometry):
+it restarts with their evidence, not one scan's.
 A pose dragged aside by scans from a place the survey took for another
 is moved back to a past pose of the filter carried forward by odometry
 once the recent scans agree with that one and not with it

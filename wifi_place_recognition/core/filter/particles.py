@@ -9,6 +9,7 @@ disagreeing with the particles (a kidnapped robot); :class:`FusionParams`
 are the parameters of every piece (a model file's ``fusion`` section).
 """
 
+from collections import deque
 from dataclasses import asdict, dataclass
 import math
 
@@ -40,8 +41,8 @@ class FusionParams(SectionParams):
 
     SECTION = 'fusion'
     POSITIVE = ('particles', 'wifi_sd', 'wifi_outlier', 'start_sd',
-                'reset_sigmas', 'reset_after', 'track_s', 'hindsight_m',
-                'mismatch_width')
+                'reset_sigmas', 'reset_after', 'reset_window', 'track_s',
+                'hindsight_m', 'mismatch_width')
     SIGNED = ('drift_mean',)
 
     particles: int = 3000
@@ -69,7 +70,9 @@ class FusionParams(SectionParams):
     reset_sigmas: float = 3.0         # a scan this many sd off disagrees
     reset_track_sigmas: float = 2.0   # one its misfit did not widen: from
     #                                   this many (0: as any; .sensor)
-    reset_after: int = 10             # so many in a row: start afresh
+    reset_after: int = 10             # so many of the last reset_window
+    reset_window: int = 30            # scans: start afresh (reset_after:
+    #                                   in a row)
     idle_speed: float = 0.5           # m/s: spread per second without odometry
     idle_turn_rate: float = 0.5       # rad/s: the same for the heading
     pose_scans: int = 10              # the pose's covariance from the last
@@ -85,12 +88,17 @@ class FusionParams(SectionParams):
         """Refuse values that would make the filter meaningless."""
         super().__post_init__()
         for name, top in (('particles', 10 ** 6), ('reset_after', 10 ** 6),
-                          ('pose_scans', 10 ** 4),
+                          ('reset_window', 10 ** 6), ('pose_scans', 10 ** 4),
                           ('mismatch_scans', 10 ** 4)):
             value = getattr(self, name)
             if value != int(value) or value > top:
                 raise ValueError(f'fusion parameter {name} = {value!r}: '
                                  f'expected a whole number up to {top}')
+        if self.reset_window < self.reset_after:
+            raise ValueError(f'fusion parameters reset_after = '
+                             f'{self.reset_after!r}, reset_window = '
+                             f'{self.reset_window!r}: expected reset_window '
+                             f'>= reset_after')
         if self.coverage_full > 1:
             raise ValueError(f'fusion parameter coverage_full = '
                              f'{self.coverage_full!r}: expected 0 to 1')
@@ -142,6 +150,7 @@ class ParticleFilter:
         self.weight = None
         self.disagreeing = 0
         self.most_disagreeing = 0
+        self._recent = deque(maxlen=int(self.params.reset_window))
 
     @property
     def rng(self):
@@ -170,7 +179,7 @@ class ParticleFilter:
         n = int(self.params.particles)
         self.state = self._fresh(n, xy, yaw, sd, yaw_sd)
         self.weight = np.full(n, 1.0 / n)
-        self.disagreeing = 0
+        self._forget_disagreeing()
 
     def _fresh(self, n, xy, yaw=None, sd=None, yaw_sd=0.0):
         """Return ``n`` particles around ``xy`` (see :meth:`start`)."""
@@ -196,20 +205,20 @@ class ParticleFilter:
         Weigh the particles by a measurement; return why it restarted.
 
         ``scan``: what the sensor model weighs (a :class:`WifiPosition`).
-        After ``reset_after`` scans in a row that the sensor model finds
-        too far from the estimate, the filter starts afresh at the scan
-        (:data:`DISAGREED`): the robot was carried away (kidnapped), or the
-        filter went wrong; it does too when no particle fits the scan
-        (:data:`NOTHING_FITS`). '' when it did not restart.
-        ``most_disagreeing``: the most scans in a row that disagreed so
-        far (``reset_after`` once it restarted; below it, how near).
+        When ``reset_after`` of the last ``reset_window`` scans are ones
+        the sensor model finds too far from the estimate, the filter starts
+        afresh at the scan (:data:`DISAGREED`): the robot was carried away
+        (kidnapped), or the filter went wrong. Not only in a row: a scan
+        now and then near enough (noise, one its misfit or mismatch
+        widened) does not start the count again. It starts afresh too when
+        no particle fits the scan (:data:`NOTHING_FITS`). '' when it did
+        not restart. ``most_disagreeing``: the most of ``reset_window``
+        scans that disagreed so far (``reset_after`` once it restarted;
+        below it, how near).
         """
-        if self.sensor.disagrees(*self.position(), scan):
-            self.disagreeing += 1
-            self.most_disagreeing = max(self.most_disagreeing,
-                                        self.disagreeing)
-        else:
-            self.disagreeing = 0
+        self._recent.append(self.sensor.disagrees(*self.position(), scan))
+        self.disagreeing = int(sum(self._recent))
+        self.most_disagreeing = max(self.most_disagreeing, self.disagreeing)
         if self.disagreeing >= self.params.reset_after:
             self.start(self.sensor.centre(scan))
             return DISAGREED
@@ -237,6 +246,11 @@ class ParticleFilter:
         self.state[:, 0] = xy[0] + c * d[:, 0] - s * d[:, 1]
         self.state[:, 1] = xy[1] + s * d[:, 0] + c * d[:, 1]
         self.state[:, 2] = wrap(self.state[:, 2] + turn)
+        self._forget_disagreeing()
+
+    def _forget_disagreeing(self):
+        """Count the scans that disagree afresh (a start, a shift)."""
+        self._recent.clear()
         self.disagreeing = 0
 
     def drift(self):
