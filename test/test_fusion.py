@@ -7,6 +7,7 @@ fusion section, ``fit_odometry`` on a run whose odometry drifts, and pose
 CSVs with errors that name the file, row and column.
 """
 
+from dataclasses import replace
 import math
 import sys
 
@@ -424,13 +425,14 @@ def test_scans_that_keep_disagreeing_restart_the_filter_now_and_then_near():
     What a robot carried away sees when its scans are noisy, or some are
     widened by their misfit or mismatch: a scan now and then near enough
     does not start the count again (``reset_window``); with a window of
-    ``reset_after`` (ten in a row) they never restart it.
+    ``reset_after`` (ten in a row) they never restart it, nor without the
+    scans' mismatch (the scans of a hole disagree now and then too).
     """
-    far = WifiPosition(np.array([20.0, 0.0]), misfit=1.0)
-    near = WifiPosition(np.array([1.0, 0.0]), misfit=1.0)
-    scans = [near if i % 3 == 2 else far for i in range(30)]
-
-    def restarts(params):
+    def restarts(params, mismatch=1.0):
+        far = WifiPosition(np.array([20.0, 0.0]), misfit=1.0,
+                           mismatch=mismatch)
+        near = replace(far, xy=np.array([1.0, 0.0]))
+        scans = [near if i % 3 == 2 else far for i in range(30)]
         pf = ParticleFilter(params, seed=0)
         pf.start(np.zeros(2), sd=0.5)
         why = [pf.update(scan) for scan in scans]
@@ -443,6 +445,10 @@ def test_scans_that_keep_disagreeing_restart_the_filter_now_and_then_near():
     assert pf.most_disagreeing == params.reset_after
     at, pf = restarts(FusionParams(reset_window=10))
     assert at == [] and pf.most_disagreeing == 7    # of ten, at most
+    for unknown in (dict(mismatch=None), dict(params=FusionParams(
+            mismatch_scans=0))):
+        at, pf = restarts(**{'params': params, **unknown})
+        assert at == [] and pf.most_disagreeing == 2    # in a row
 
 
 def test_a_set_pose_before_any_odometry_is_anchored_at_its_stamp():

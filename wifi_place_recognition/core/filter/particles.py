@@ -210,13 +210,18 @@ class ParticleFilter:
         afresh at the scan (:data:`DISAGREED`): the robot was carried away
         (kidnapped), or the filter went wrong. Not only in a row: a scan
         now and then near enough (noise, one its misfit or mismatch
-        widened) does not start the count again. It starts afresh too when
-        no particle fits the scan (:data:`NOTHING_FITS`). '' when it did
-        not restart. ``most_disagreeing``: the most of ``reset_window``
-        scans that disagreed so far (``reset_after`` once it restarted;
-        below it, how near).
+        widened) does not start the count again, as long as the scans'
+        mismatch is known (without it the scans of a hole disagree now
+        and then too: then only ``reset_after`` in a row count). It starts
+        afresh too when no particle fits the scan (:data:`NOTHING_FITS`).
+        '' when it did not restart. ``most_disagreeing``: the most of
+        ``reset_window`` scans that disagreed so far (``reset_after`` once
+        it restarted; below it, how near).
         """
-        self._recent.append(self.sensor.disagrees(*self.position(), scan))
+        disagrees = self.sensor.disagrees(*self.position(), scan)
+        if not (disagrees or self.sensor.mismatch_known(scan)):
+            self._recent.clear()
+        self._recent.append(disagrees)
         self.disagreeing = int(sum(self._recent))
         self.most_disagreeing = max(self.most_disagreeing, self.disagreeing)
         if self.disagreeing >= self.params.reset_after:

@@ -128,11 +128,15 @@ class WifiSensorModel:
         1 up to ``mismatch_full`` times the usual, 0 from ``mismatch_none``
         times, linear between; 1 when not known or ``mismatch_scans`` is 0.
         """
-        p = self.params
-        if not p.mismatch_scans or scan.mismatch is None:
+        if not self.mismatch_known(scan):
             return 1.0
+        p = self.params
         return min(max((p.mismatch_none - scan.mismatch) /
                        (p.mismatch_none - p.mismatch_full), 0.0), 1.0)
+
+    def mismatch_known(self, scan):
+        """Return True when ``scan``'s recent mismatch is known and used."""
+        return bool(self.params.mismatch_scans) and scan.mismatch is not None
 
     def testifies(self, scan):
         """Return True when ``scan`` counts at least half (covered ground)."""
