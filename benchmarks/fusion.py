@@ -30,9 +30,10 @@ with every heading. Also: a
 kidnapped robot (two runs spliced, the odometry continuous, the true
 position jumping; each scan's answer whole, its mismatch included, as
 the node's filter takes it) and the recovery time (the error below 2 m
-for 10 s in a row), per survey; on every run, how near the filter came to a
-restart (the most of ``reset_window`` scans that disagreed); each run's drift over
-stretches of 20 m from its truth (:func:`drift_steadiness`). And leaving
+for 10 s in a row), per survey; on every run, how near the filter came
+to a restart (the most of ``reset_window`` scans that disagreed); each
+run's drift over stretches of 20 m from its truth
+(:func:`drift_steadiness`). And leaving
 a hole (:func:`hole_exits`): where the robot comes back to covered
 ground for at least 30 s after at least 10 scans in a hole, how far off
 the pose is, and how long until it is below 1 m.
@@ -281,9 +282,9 @@ def localise(params, odometry, stamps, single, seed, start=None):
     Return the fused (xy, yaw, cov) at every scan, and the margin.
 
     The margin: the most of ``reset_window`` scans that disagreed with the
-    filter (``reset_after`` restart it). ``start``: (stamp, xy, yaw) set on the
-    filter first (``set_pose``, :data:`SET_START_SD`); None: the filter
-    starts from the first scan.
+    filter (``reset_after`` restart it). ``start``: (stamp, xy, yaw) set
+    on the filter first (``set_pose``, :data:`SET_START_SD`); None: the
+    filter starts from the first scan.
     """
     fusion = Fusion(params, seed=seed)
     if start is not None:

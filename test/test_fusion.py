@@ -23,8 +23,8 @@ from wifi_place_recognition.core.filter.odometry_fit import (FitError,
                                                              fit_odometry)
 from wifi_place_recognition.core.filter.particles import (
     DISAGREED, FusionParams, ParticleFilter, UNKNOWN_VARIANCE)
-from wifi_place_recognition.core.filter.sensor import WifiPosition
 from wifi_place_recognition.core.filter.pose_spread import SETTLE_SCANS
+from wifi_place_recognition.core.filter.sensor import WifiPosition
 from wifi_place_recognition.core.filter.trajectory import (
     dead_reckoning, fuse_offline, odometry_alone, score)
 from wifi_place_recognition.data.files import DataError
