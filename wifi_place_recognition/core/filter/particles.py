@@ -71,8 +71,8 @@ class FusionParams(SectionParams):
     reset_track_sigmas: float = 2.0   # one its misfit did not widen: from
     #                                   this many (0: as any; .sensor)
     reset_after: int = 10             # so many of the last reset_window
-    reset_window: int = 30            # scans: start afresh (reset_after:
-    #                                   in a row)
+    reset_window: int = 30            # scans: start afresh (= reset_after:
+    #                                   so many in a row)
     idle_speed: float = 0.5           # m/s: spread per second without odometry
     idle_turn_rate: float = 0.5       # rad/s: the same for the heading
     pose_scans: int = 10              # the pose's covariance from the last

@@ -6,7 +6,7 @@ sigma, its misfit to odometry); :class:`WifiSensorModel` weighs particles
 by it. Another model (e.g. a per-AP radio map) brings its own measurement
 type and the same methods: ``measurement`` (from a scan's answer),
 ``off_track``, ``centre``, ``trust``, ``sounds_like_survey``,
-``testifies``, ``disagrees``, ``likelihood``.
+``mismatch_known``, ``testifies``, ``disagrees``, ``likelihood``.
 """
 
 from dataclasses import dataclass, replace
