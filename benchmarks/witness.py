@@ -55,7 +55,7 @@ then the smallest start-up delay. Table on stdout, JSON in
 ``benchmarks/results/witness.json``.
 
     python benchmarks/witness.py [--data ../shared/datasets/robot]
-                                 [--cache FOLDER]
+                                 [--cache FOLDER] [--jobs 2]
 """
 
 import argparse
@@ -63,6 +63,7 @@ from dataclasses import replace
 import itertools
 import json
 import math
+import multiprocessing
 from pathlib import Path
 import subprocess
 import sys
@@ -453,28 +454,41 @@ def summary(figures):
                                 s['delay_s'] <= 60) for s in starts)}
 
 
-def choose(cases):
+_held = []      # the cases the candidates are scored on (kept for forks)
+
+
+def _scored(params):
+    """Return the summary of the held cases under ``params``."""
+    return summary([evaluate(c, params) for c in _held])
+
+
+def scored(cases, candidates, jobs):
+    """Return the summary of ``cases`` under each candidate, in ``jobs``."""
+    _held[:] = cases
+    if jobs == 1:
+        return [_scored(c) for c in candidates]
+    with multiprocessing.get_context('fork').Pool(jobs) as pool:
+        return pool.map(_scored, candidates, chunksize=1)
+
+
+def choose(cases, jobs=1):
     """Return the WitnessParams chosen on ``cases`` and what was tried."""
-    tried, best = [], None
-    for values in itertools.product(*GRID.values()):
-        params = WitnessParams(**dict(zip(GRID, values)))
-        s = summary([evaluate(c, params) for c in cases])
-        tried.append({**dict(zip(GRID, values)), **s})
-        key = (s['false_alarms'], s['inside_flagged'], s['missed'],
-               s['delay_median_s'] + s['delay_max_s'])
-        if best is None or key < best[0]:
-            best = (key, params)
-    params = best[1]
-    best = None
-    for values in itertools.product(*SEED_GRID.values()):
-        candidate = replace(params, **dict(zip(SEED_GRID, values)))
-        s = summary([evaluate(c, candidate) for c in cases])
-        tried.append({**dict(zip(SEED_GRID, values)), **s})
-        key = (s['startup_bad'], s['reseed_good_share'] < 0.9,
-               s['startup_max_s'], -s['reseed_good_share'])
-        if best is None or key < best[0]:
-            best = (key, candidate)
-    return best[1], tried
+    grid = [dict(zip(GRID, v)) for v in itertools.product(*GRID.values())]
+    found = scored(cases, [WitnessParams(**g) for g in grid], jobs)
+    tried = [{**g, **s} for g, s in zip(grid, found)]
+    i = min(range(len(grid)), key=lambda i: (
+        found[i]['false_alarms'], found[i]['inside_flagged'],
+        found[i]['missed'],
+        found[i]['delay_median_s'] + found[i]['delay_max_s']))
+    params = WitnessParams(**grid[i])
+    grid = [dict(zip(SEED_GRID, v))
+            for v in itertools.product(*SEED_GRID.values())]
+    found = scored(cases, [replace(params, **g) for g in grid], jobs)
+    tried += [{**g, **s} for g, s in zip(grid, found)]
+    i = min(range(len(grid)), key=lambda i: (
+        found[i]['startup_bad'], found[i]['reseed_good_share'] < 0.9,
+        found[i]['startup_max_s'], -found[i]['reseed_good_share']))
+    return replace(params, **grid[i]), tried
 
 
 def row(name, f):
@@ -504,6 +518,8 @@ def main():
     p.add_argument('--cache', type=Path, default=None,
                    help='folder for the trained models (reused if there; '
                         'default: a temporary folder)')
+    p.add_argument('--jobs', type=int, default=1, choices=(1, 2, 3, 4),
+                   help='processes scoring the thresholds tried (default 1)')
     args = p.parse_args()
     import tempfile
     with tempfile.TemporaryDirectory() as tmp:
@@ -538,7 +554,8 @@ def main():
         if not tune:
             print(f'{site}: no other building to choose the thresholds on')
             continue
-        params, tried = choose([c for t in tune for c in cases[t]])
+        params, tried = choose([c for t in tune for c in cases[t]],
+                               args.jobs)
         figures = {c.run.name: evaluate(c, params) for c in cases[site]}
         results['buildings'][site].update({
             'chosen_on': tune, 'params': vars(params),

@@ -6,8 +6,9 @@ localiser pose every second. Checked: agreement, one bad scan, a
 sustained disagreement, the yaw only when the fused yaw is known, another
 floor's frame, the survey's coverage, a silent localiser, seeds at
 start-up and when lost (none from a fused pose built on scans off the
-survey), bad input refused with a reason, and the state:
-agrees only when WiFi compared, cannot tell when nothing was.
+survey), bad input refused with a reason, the state: agrees only when
+WiFi compared, cannot tell when nothing was; and the per-pose arithmetic
+against numpy's linear algebra.
 """
 
 from dataclasses import replace
@@ -19,9 +20,11 @@ from wifi_place_recognition.core.filter.particles import UNKNOWN_VARIANCE
 from wifi_place_recognition.core.witness import (AGREES, CANNOT_TELL,
                                                  DISAGREES, LOST,
                                                  WAITING, Witness)
-from wifi_place_recognition.core.witness_inputs import pose_problem
+from wifi_place_recognition.core.witness_inputs import Pose, pose_problem
 from wifi_place_recognition.core.witness_offline import judge_offline
+from wifi_place_recognition.core.witness_pairing import Streams
 from wifi_place_recognition.core.witness_params import WitnessParams
+from wifi_place_recognition.core.witness_testimony import mahalanobis
 
 SPEED = 0.5
 
@@ -332,6 +335,38 @@ def test_bad_poses_are_refused_with_a_reason():
     assert w.local.stamp == 5.0
     assert w.fused(6.0, 'map', [math.nan, 0], 0.0, cov()) is None
     assert w.scan(6.0, 'map', [0, 0], math.inf) is None
+
+
+def test_the_per_pose_arithmetic_matches_numpys_linear_algebra():
+    # closed forms on every pose and scan: the verdict, the fused pose's
+    # sd, the Mahalanobis distance, the distance moved since a stamp
+    rng = np.random.default_rng(0)
+    for k in range(3000):
+        a = rng.normal(size=(3, 3)) * rng.choice([1e-3, 1.0, 1e3], 3)
+        c = [a @ a.T, (a + a.T) / 2, a[:, :2] @ a[:, :2].T][k % 3]
+        d = np.diag(c)
+        scaled = c / np.sqrt(np.outer(np.abs(d), np.abs(d)))
+        expected = bool((d > 0).all() and np.linalg.eigvalsh(scaled).min()
+                        > 1e-9)
+        assert (pose_problem(0.0, [1, 2], 0.0, c) is None) == expected, c
+        if (d[:2] > 0).all():
+            pose = Pose.of(0.0, 'map', [0, 0], 0.0, c)
+            assert pose.sd ** 2 == pytest.approx(max(np.linalg.eigvalsh(
+                c[:2, :2])), rel=1e-9, abs=1e-12)
+        delta = rng.normal(size=2) * 10
+        m = (a @ a.T)[:2, :2] + 1e-3 * np.eye(2)
+        assert mahalanobis(delta, m) == pytest.approx(
+            (delta @ np.linalg.solve(m, delta), np.linalg.norm(delta)),
+            rel=1e-6)
+    streams = Streams()
+    stamps = np.sort(rng.choice(np.arange(50.0), 60))   # repeats
+    for t in stamps:
+        streams.fused(Pose.of(t, 'map', rng.normal(size=2), 0.0, cov()), 1.0)
+    xy = np.array([h[1:] for h in streams.history])
+    for t in np.arange(-1.0, 52.0, 0.5):
+        i = min(np.searchsorted(stamps, t), len(stamps) - 1)
+        assert streams.moved_since(t) == pytest.approx(
+            np.linalg.norm(xy[i] - xy[-1]))
 
 
 def test_parameters_are_checked_naming_the_field():

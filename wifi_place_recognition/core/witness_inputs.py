@@ -10,6 +10,10 @@ import math
 
 import numpy as np
 
+#: A pose's covariance is positive definite when every eigenvalue of its
+#: correlation matrix (the diagonal scaled to 1) exceeds this.
+MIN_SCALED_EIGENVALUE = 1e-9
+
 
 @dataclass
 class Pose:
@@ -30,7 +34,8 @@ class Pose:
     @property
     def sd(self):
         """Return the position's largest standard deviation (m)."""
-        return math.sqrt(max(np.linalg.eigvalsh(self.cov[:2, :2])))
+        (a, _), (b, c) = self.cov[:2, :2].tolist()   # lower triangle
+        return math.sqrt((a + c) / 2 + math.hypot((a - c) / 2, b))
 
     @property
     def yaw_sd(self):
@@ -52,16 +57,41 @@ def pose_problem(stamp, xy, yaw, cov):
     cov = np.asarray(cov, np.float64)
     if cov.shape != (3, 3) or not np.isfinite(cov).all():
         return f'covariance {np.round(cov, 6).tolist()} is not finite'
-    if not np.allclose(cov, cov.T, rtol=1e-6, atol=1e-9):
+    c = cov.tolist()    # plain floats: this runs on every pose
+    if any(abs(c[i][j] - c[j][i]) > 1e-9 + 1e-6 * abs(c[j][i])
+           for i, j in ((0, 1), (0, 2), (1, 2), (1, 0), (2, 0), (2, 1))):
         return f'covariance {np.round(cov, 6).tolist()} is not symmetric'
-    # the yaw row scaled to 1, so an unknown yaw (1e6) does not swamp x, y
-    scale = 1 / np.sqrt(np.maximum(np.diag(cov), 1e-300))
-    low = float(np.linalg.eigvalsh(cov * np.outer(scale, scale)).min())
-    if not (np.diag(cov) > 0).all() or low <= 1e-9:
+    if not (min(c[0][0], c[1][1], c[2][2]) > 0 and
+            _above(c, MIN_SCALED_EIGENVALUE)):
+        # the yaw row scaled to 1, so an unknown yaw (1e6) does not swamp x, y
+        scale = 1 / np.sqrt(np.maximum(np.diag(cov), 1e-300))
+        low = float(np.linalg.eigvalsh(cov * np.outer(scale, scale)).min())
         return (f'covariance x, y, yaw diagonal {np.diag(cov).tolist()} is '
                 f'not positive definite (smallest scaled eigenvalue '
                 f'{low:.3g})')
     return None
+
+
+def _above(c, floor):
+    """
+    Return True if every eigenvalue of the correlation matrix of c > floor.
+
+    ``c``: a symmetric 3x3 (nested lists) with a positive diagonal; scaled
+    to a unit diagonal (so an unknown yaw, 1e6, does not swamp x, y), its
+    eigenvalues all exceed ``floor`` when the pivots of its LDL'
+    factorisation less ``floor`` on the diagonal are all positive.
+    """
+    s = [1 / math.sqrt(c[i][i]) for i in range(3)]
+    a = [[c[i][j] * s[i] * s[j] - floor * (i == j) for j in range(3)]
+         for i in range(3)]
+    d0 = a[0][0]
+    if d0 <= 0:
+        return False
+    d1 = a[1][1] - a[1][0] ** 2 / d0
+    if d1 <= 0:
+        return False
+    r = a[2][1] - a[2][0] * a[1][0] / d0
+    return a[2][2] - a[2][0] ** 2 / d0 - r ** 2 / d1 > 0
 
 
 def coverage_is_valid(coverage):

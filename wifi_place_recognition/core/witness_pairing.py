@@ -121,6 +121,9 @@ class Streams:
         """Return how far the fused pose moved since ``stamp`` (m)."""
         if not self.history:
             return 0.0
-        stamps = np.array([h[0] for h in self.history])
-        i = int(np.clip(np.searchsorted(stamps, stamp), 0, len(stamps) - 1))
-        return float(math.dist(self.history[i][1:], self.history[-1][1:]))
+        first = self.history[-1]
+        for row in reversed(self.history):    # back to the first at stamp
+            if row[0] < stamp:
+                break
+            first = row
+        return float(math.dist(first[1:], self.history[-1][1:]))

@@ -59,9 +59,10 @@ def covered(survey, frame, xy, coverage_m):
 
 
 def mahalanobis(delta, cov):
-    """Return (squared Mahalanobis distance, Euclidean distance)."""
-    return (float(delta @ np.linalg.solve(cov, delta)),
-            float(np.linalg.norm(delta)))
+    """Return (squared Mahalanobis distance, Euclidean distance) in 2-D."""
+    (x, y), ((a, b), (c, d)) = delta.tolist(), cov.tolist()
+    return ((d * x * x - (b + c) * x * y + a * y * y) / (a * d - b * c),
+            math.hypot(x, y))
 
 
 def fused_distance(local, pose, moved, params):
