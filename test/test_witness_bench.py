@@ -1,0 +1,71 @@
+"""
+The witness benchmark's choice of thresholds, in one process and in two.
+
+Synthetic runs (a robot driving along x, the localiser displaced 10 m
+half way): ``benchmarks/witness.py``'s ``choose`` with ``--jobs 2`` must
+try the same thresholds in the same order, score them the same and
+choose the same as with one process.
+"""
+
+import importlib
+import json
+import math
+import sys
+from types import SimpleNamespace
+
+from conftest import REPO
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope='module')
+def witness():
+    """Return the benchmark module benchmarks/witness.py."""
+    sys.path.insert(0, str(REPO / 'benchmarks'))
+    try:
+        return importlib.import_module('witness')
+    finally:
+        sys.path.remove(str(REPO / 'benchmarks'))
+
+
+def stream(t, xy, sd, yaw_sd=0.05):
+    """Return (t, xy, yaw, cov): heading along x, a diagonal covariance."""
+    cov = np.tile(np.diag([sd ** 2, sd ** 2, yaw_sd ** 2]), (len(t), 1, 1))
+    return t, xy, np.zeros(len(t)), cov
+
+
+def case(seed):
+    """Return a run of 200 s: the truth, scans, fused poses, two episodes."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 200.0)
+    xy = np.column_stack([0.5 * t, np.zeros_like(t)])
+    local = stream(t, xy, 0.1)
+    near = xy + rng.normal(0, 1.0, xy.shape)
+    scans = (t, near, np.full(len(t), 2.0), np.full(len(t), math.nan))
+    fused = stream(t, xy + rng.normal(0, 0.3, xy.shape), 0.5)
+    displaced = stream(t, xy + (t >= 100)[:, None] * [0.0, 10.0], 0.1)
+    inside = stream(t, xy + (t >= 100)[:, None] * [0.0, 0.2], 0.1)
+    truth = np.column_stack([t, xy, np.zeros_like(t)])
+    return SimpleNamespace(
+        local=local, truth=truth, inside=[(0, 100.0, inside)],
+        scans={k: scans for k in ('full', 'holes')},
+        survey={k: xy[::2] for k in ('full', 'holes')},
+        fused={k: [fused] * 3 for k in ('full', 'holes')},
+        episodes=[(k, 'displaced', 0, 100.0, displaced, fused, scans,
+                   truth, xy[::2]) for k in ('full', 'holes')])
+
+
+def test_thresholds_tried_in_two_processes_are_those_in_one(
+        witness, monkeypatch):
+    monkeypatch.setattr(witness, 'GRID', {
+        'agree_sigmas': (3.0, 4.0), 'alarm': (15.0, 60.0)})
+    monkeypatch.setattr(witness, 'SEED_GRID', {
+        'sure_sd': (0.5, 2.0), 'sure_s': (0.0, 60.0)})
+    cases = [case(0), case(1)]
+    two, tried_two = witness.choose(cases, 2)   # first: nothing held yet
+    one, tried_one = witness.choose(cases, 1)
+    assert len(tried_one) == 8
+    assert one == two
+    assert json.dumps(tried_two) == json.dumps(tried_one)
+    # the episodes were judged: the thresholds tried differ in delay
+    assert len({t['delay_median_s'] for t in tried_one[:4]}) > 1
