@@ -175,14 +175,19 @@ def surveyed_model(tmp_path_factory):
     return model
 
 
+def benchmark(name):
+    """Return the benchmark module benchmarks/<name>.py."""
+    sys.path.insert(0, str(REPO / 'benchmarks'))
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.remove(str(REPO / 'benchmarks'))
+
+
 @pytest.fixture(scope='module')
 def fusion():
     """Return the benchmark module benchmarks/fusion.py."""
-    sys.path.insert(0, str(REPO / 'benchmarks'))
-    try:
-        return importlib.import_module('fusion')
-    finally:
-        sys.path.remove(str(REPO / 'benchmarks'))
+    return benchmark('fusion')
 
 
 def run(args, **kwargs):

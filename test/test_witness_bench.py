@@ -7,13 +7,11 @@ try the same thresholds in the same order, score them the same and
 choose the same as with one process.
 """
 
-import importlib
 import json
 import math
-import sys
 from types import SimpleNamespace
 
-from conftest import REPO
+from conftest import benchmark
 import numpy as np
 import pytest
 
@@ -21,11 +19,7 @@ import pytest
 @pytest.fixture(scope='module')
 def witness():
     """Return the benchmark module benchmarks/witness.py."""
-    sys.path.insert(0, str(REPO / 'benchmarks'))
-    try:
-        return importlib.import_module('witness')
-    finally:
-        sys.path.remove(str(REPO / 'benchmarks'))
+    return benchmark('witness')
 
 
 def stream(t, xy, sd, yaw_sd=0.05):
