@@ -14,7 +14,11 @@ own position search (a survey's folds hold out stretches of time, most of
 them passed again: few of their scans lie off the survey):
 
 - **default**: the package's circle (the k-NN sigma widened at the
-  survey's edge by ``edge_sigma_m`` times the one-sidedness to the 4th).
+  survey's edge by ``edge_sigma_m`` times the one-sidedness to the 4th,
+  and since round 29 by MISMATCH_SIGMA_M where the scan sounds more than
+  MISMATCH_WIDE times as unlike its references as the survey's usual).
+- **before round 29**: the same without the mismatch's widening; every
+  idea below widens this one.
 - **edge from cut places**: that edge widening calibrated on the cut
   scans off the survey instead.
 - **coverage widening**: a coverage model (the package's features, a
@@ -40,6 +44,11 @@ them passed again: few of their scans lie off the survey):
   folds), each held-out scan placed among the kept ones (the true class
   searched), m the least that puts 95 % of the held-out scans louder
   than the kept ones by more than k inside (none with fewer than 10).
+- **mismatch k x, w m**: the circle widened to hypot(sigma, w) where the
+  scan's mismatch over the survey's usual (what the filter reads) is
+  above k. A grid of k and w, chosen as the loudness widening is, on
+  each building (reported on the other) and on both together (what the
+  package ships).
 
 Per pair: the share of the test scans inside their circle (all, in holes,
 covered), the cut model's ROC AUC against the scans in holes beside the
@@ -50,6 +59,9 @@ dataset's test file (another day; the model trained by ``train_model
 --seed 0``, UJIIndoorLoc the shipped model), where a widening must not
 push a circle past 0.98. Table on stdout, JSON in
 ``benchmarks/results/circle-ideas.json``.
+
+The loudness and mismatch widenings are
+scored on the circle before round 29. ``--panel`` shows those chosen.
 
     python benchmarks/circle_ideas.py [--data ../shared/datasets/robot]
                                       [--panel]
@@ -70,7 +82,7 @@ from wifi_place_recognition.core.coverage import (
 from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.locator import (
     calibrated_edge_sigma, EDGE_POWER, least_widening, LEVELS, Locator,
-    R95)
+    MISMATCH_SIGMA_M, MISMATCH_WIDE, R95)
 from wifi_place_recognition.core.preprocessing import signal, signal_dbm
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.training.config import TrainConfig
@@ -91,17 +103,40 @@ LOUD = tuple((k, m) for k in (0.0, 1.0, 2.0, 3.0, 5.0)
              for m in (0.5, 1.0, 2.0, 4.0))
 CALIBRATED_K = 3.0
 LOUD_CALIBRATED = f'loud {CALIBRATED_K:g} dB, calibrated'
+#: Mismatch widenings: (ratio over the usual, metres added in quadrature).
+MISMATCH = tuple((k, w) for k in (1.1, 1.2, 1.3, 1.4, 1.5, 1.6)
+                 for w in (2.0, 3.0, 4.0, 5.0, 6.0, 8.0))
+BEFORE = 'before round 29'
 #: The band a circle should hold, and where a choice aims within it.
 BAND, AIM = (0.90, 0.98), 0.95
 
 #: The ideas, in the table's order (the loudness grid in its own table).
-ALL = ('default', 'edge from cut places', 'coverage widening',
+ALL = ('default', BEFORE, 'edge from cut places', 'coverage widening',
        'coverage widening, prior held out', LOUD_CALIBRATED)
 
 
 def loud_name(k, m):
     """Return the name of a loudness widening."""
     return f'loud {k:g} dB, {m:g} m/dB'
+
+
+def mismatch_name(k, w):
+    """Return the name of a mismatch widening."""
+    return f'mismatch {k:g} x, {w:g} m'
+
+
+def before(circle, mismatch):
+    """Return the circles' sigma without the mismatch's widening."""
+    wide = np.nan_to_num(mismatch, nan=0.0) > MISMATCH_WIDE
+    return np.where(wide, np.sqrt(np.maximum(
+        circle ** 2 - MISMATCH_SIGMA_M ** 2, 0.0)), circle)
+
+
+def mismatch_circles(circle, mismatch):
+    """Return {idea: sigma}: the mismatch grid, on the circle before."""
+    ratio = np.nan_to_num(mismatch, nan=0.0)
+    return {mismatch_name(k, w): np.where(ratio > k, np.hypot(circle, w),
+                                          circle) for k, w in MISMATCH}
 
 
 def excess(locator, columns, rssi, c):
@@ -239,7 +274,9 @@ def pair(model, survey_csv, test, kept, calibrated):
     ``calibrated``: the survey's :func:`calibrated_loud_m`.
     """
     rssi = align(model, test.fp)
-    proba, xy, circle, p, _ = model.predict_positions(rssi, coverage=True)
+    proba, xy, circle, p, mismatch = model.predict_positions(
+        rssi, coverage=True)
+    default, circle = circle, before(circle, mismatch)
     loud = excesses(model.position, rssi, proba.argmax(axis=1))
     loud_m, loud_scans = calibrated
     knn = model.predict_positions(rssi, widened=False)[2]
@@ -262,7 +299,7 @@ def pair(model, survey_csv, test, kept, calibrated):
         shifts['coverage widening, prior held out'] = \
             logit(held_out) - logit(covered.mean())
     test_x = test_features(model, rssi, proba.argmax(axis=1))
-    sigmas = {'default': circle}
+    sigmas = {'default': default, BEFORE: circle}
     cut_off = ~covered
     edge = calibrated_edge_sigma(c_error[cut_off], c_knn[cut_off],
                                  c_side[cut_off])
@@ -293,6 +330,7 @@ def pair(model, survey_csv, test, kept, calibrated):
         for what, rows in (('missed', miss), ('inside', hit))
         for key, v in (('one_sidedness', side), ('p_covered', p))}
     sigmas.update(loud_circles(circle, loud, loud_m))
+    sigmas.update(mismatch_circles(circle, mismatch))
     out['loudness_excess_db'] = {   # medians, scans with an AP heard
         where: float(np.median(loud[rows & np.isfinite(loud)]))
         if (rows & np.isfinite(loud)).any() else None
@@ -334,13 +372,15 @@ def panel(root, folder, shown):
         files, train, test = _data(root, name, False, folder)
         model, basis = _model(name, files, folder)
         rssi = align(model, test)
-        proba, xy, circle = model.predict_positions(rssi)
+        proba, xy, default, _, mismatch = model.predict_positions(
+            rssi, coverage=True)
+        circle = before(default, mismatch)
         error = np.linalg.norm(xy - test.position, axis=1)
         ok = np.isfinite(error)
         loud_m, loud_scans = calibrated_loud_m(model, train)
-        sigmas = {'default': circle, **loud_circles(
+        sigmas = {'default': default, BEFORE: circle, **loud_circles(
             circle, excesses(model.position, rssi, proba.argmax(axis=1)),
-            loud_m)}
+            loud_m), **mismatch_circles(circle, mismatch)}
         out[name] = {'model': basis, 'scans': int(ok.sum()),
                      'loud_calibrated_m_per_db': loud_m,
                      'loud_calibration_scans': loud_scans,
@@ -382,20 +422,27 @@ def summary(results):
     return out
 
 
-def loud_choice(figures):
+def choice(figures, names, pooled=False):
     """
-    Return {building: the loudness widening chosen on it} (or the default).
+    Return {building: the widening of ``names`` chosen on it}.
 
     ``figures``: :func:`summary`'s. On each building: the most circles
     within the band, then the least distance outside it, then the least
-    mean distance from AIM; the default wins a tie.
+    mean distance from AIM; the first of ``names`` wins a tie. With
+    ``pooled``, also 'all': chosen on every building together.
     """
-    names = ['default', *(loud_name(k, m) for k, m in LOUD)]
-    return {b: min(names, key=lambda n: (
-        -figures[n][b]['within_0.90_0.98'],
-        round(figures[n][b]['distance_outside_band'], 9),
-        round(figures[n][b]['mean_distance_from_0.95'], 9)))
-        for b in figures['default']}
+    def key(n, buildings):
+        f = [figures[n][b] for b in buildings]
+        runs = sum(v['runs'] for v in f)
+        return (-sum(v['within_0.90_0.98'] for v in f),
+                round(sum(v['distance_outside_band'] for v in f), 9),
+                round(sum(v['mean_distance_from_0.95'] * v['runs']
+                          for v in f) / runs, 9))
+    buildings = list(figures[names[0]])
+    out = {b: min(names, key=lambda n: key(n, [b])) for b in buildings}
+    if pooled:
+        out['all'] = min(names, key=lambda n: key(n, buildings))
+    return out
 
 
 def loud_table(results):
@@ -457,8 +504,13 @@ def main():
     loud_table(results)
     out = {'protocol': __doc__.split('\n\n')[1].replace('\n', ' '),
            'pairs': results, 'summary': summary(results)}
-    out['loud_chosen_on'] = chosen = loud_choice(out['summary'])
-    shown = ['default', LOUD_CALIBRATED, *sorted(set(chosen.values()))]
+    out['loud_chosen_on'] = chosen = choice(
+        out['summary'], [BEFORE, *(loud_name(k, m) for k, m in LOUD)])
+    out['mismatch_chosen_on'] = by_mismatch = choice(
+        out['summary'], [BEFORE, *(mismatch_name(k, w) for k, w in
+                                   MISMATCH)], pooled=True)
+    shown = ['default', BEFORE, LOUD_CALIBRATED,
+             *sorted(set(chosen.values()) | set(by_mismatch.values()))]
     if args.panel:
         print('panel: in the circle: ' + ', '.join(shown))
         with tempfile.TemporaryDirectory() as folder:
@@ -468,12 +520,12 @@ def main():
             f'{b} {v["min"]:.3f}-{v["max"]:.3f}, within 0.90-0.98 '
             f'{v["within_0.90_0.98"]} of {v["runs"]}' for b, v in
             out['summary'][name].items()))
-    for b, name in chosen.items():
+    for b, name in [*chosen.items(), *by_mismatch.items()]:
         print(f'chosen on {b}: {name}; on the others: ' + '; '.join(
             f'{o} within 0.90-0.98 {v["within_0.90_0.98"]} of {v["runs"]} '
-            f'(default {out["summary"]["default"][o]["within_0.90_0.98"]}),'
-            f' outside by {v["distance_outside_band"]:.3f} (default '
-            f'{out["summary"]["default"][o]["distance_outside_band"]:.3f})'
+            f'({BEFORE} {out["summary"][BEFORE][o]["within_0.90_0.98"]}),'
+            f' outside by {v["distance_outside_band"]:.3f} ({BEFORE} '
+            f'{out["summary"][BEFORE][o]["distance_outside_band"]:.3f})'
             for o, v in out['summary'][name].items() if o != b))
     with atomic_write(args.out, 'w') as f:
         json.dump(out, f, indent=1)

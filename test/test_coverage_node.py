@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 from ros_helpers import running_node
 from wifi_place_recognition.core.evaluation import align, unknown_aps
+from wifi_place_recognition.core.locator import (MISMATCH_SIGMA_M,
+                                                 MISMATCH_WIDE)
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.ros.messages import status_values
 
@@ -36,7 +38,7 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
     #                                   two answered at the hole's edges
     with running_node(ros, tmp_path, model_path, 'coverage_node') as (
             client, proc, model):
-        _, _, sigma, expected, mismatch = model.predict_positions(
+        proba, xy, sigma, expected, mismatch = model.predict_positions(
             align(model, fp), coverage=True)
         narrow = model.predict_positions(align(model, fp), widened=False)[2]
         got, sigmas, knn, sounds = [], [], [], []
@@ -88,5 +90,15 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
         np.testing.assert_allclose(sigmas, sigma[rows], rtol=1e-3,
                                    atol=2e-3)
         assert (np.array(sigmas[3:]) > narrow[rows[3:]] + 1.0).all()
+        # and by MISMATCH_SIGMA_M more where it sounds unlike the survey
+        # (the hole's scans)
+        edge = np.array([model.position.widened(xy[r], narrow[r],
+                                                proba[r].argmax())
+                         for r in rows])
+        unlike = mismatch[rows] > MISMATCH_WIDE
+        assert 0 < unlike.sum() < len(rows)
+        np.testing.assert_allclose(
+            sigmas, np.where(unlike, np.hypot(edge, MISMATCH_SIGMA_M), edge),
+            rtol=1e-3, atol=2e-3)
         # and the k-NN's, which the localization monitor reads
         np.testing.assert_allclose(knn, narrow[rows], rtol=1e-6, atol=0)

@@ -2,6 +2,7 @@
 
 from dataclasses import replace
 import json
+import math
 
 from conftest import save_unchecked
 import numpy as np
@@ -11,7 +12,9 @@ from wifi_place_recognition.core.artifact import (_digest, load_model,
 from wifi_place_recognition.core.locator import (calibrated_edge_sigma,
                                                  calibrated_sigma, Locator,
                                                  MAX_EDGE_SIGMA_M,
-                                                 MAX_MISMATCH_DB, R95)
+                                                 MAX_MISMATCH_DB,
+                                                 MISMATCH_SIGMA_M,
+                                                 MISMATCH_WIDE, R95)
 from wifi_place_recognition.core.preprocessing import signal
 
 
@@ -223,6 +226,20 @@ def test_the_circle_widens_where_the_answer_lies_at_the_survey_edge():
                                                          rel=1e-5)
     with pytest.raises(ValueError, match='edge_sigma must be in'):
         _corridor(-0.5)
+
+
+def test_the_circle_widens_where_the_scan_sounds_unlike_the_survey():
+    plain, wide = _corridor(0.0), _corridor(4.0)
+    distance = np.full(21, 5.0)
+    distance[0] = 3.0                   # at the corridor's end: side 1
+    xy, knn = wide.weighted(distance, 1, 0)
+    for mismatch, extra in ((math.nan, 0.0), (0.5, 0.0), (MISMATCH_WIDE, 0.0),
+                            (MISMATCH_WIDE + 0.01, MISMATCH_SIGMA_M),
+                            (5.0, MISMATCH_SIGMA_M)):
+        assert plain.widened(xy, knn, 0, mismatch) == pytest.approx(
+            np.hypot(3.0, extra), rel=1e-6)
+        assert wide.widened(xy, knn, 0, mismatch) == pytest.approx(
+            np.hypot(np.hypot(3.0, 4.0), extra), rel=1e-6)
 
 
 def test_the_edge_sigma_is_the_least_that_holds_95_percent():

@@ -48,6 +48,14 @@ MAX_EDGE_SIGMA_M = 15.0
 #: with survey holes) against 2: as many circles within 90-98 % and
 #: none widened past 98 % that was not already.
 EDGE_POWER = 4
+#: A scan whose :meth:`Locator.relative_mismatch` is above this was likely
+#: taken where the survey never went, however sure its answer looks ...
+MISMATCH_WIDE = 1.4
+#: ... and its sigma is widened by this (m, in quadrature). Chosen on the
+#: robot runs (``benchmarks/circle_ideas.py``: the most circles within
+#: 90-98 % on both buildings, none of the panel's test files moved
+#: farther from that band).
+MISMATCH_SIGMA_M = 4.0
 
 
 @dataclass
@@ -72,7 +80,8 @@ class Locator:
     off the survey (:func:`calibrated_edge_sigma`; 0: not widened).
     ``usual_mismatch`` (dB): the median :meth:`mismatch` of held-out scans
     on covered ground, what another day's scans there show too (0: not
-    known).
+    known); a scan that sounds more than :data:`MISMATCH_WIDE` times as
+    unlike its references is widened by :data:`MISMATCH_SIGMA_M` too.
     """
 
     origin: np.ndarray    # float64 (2,)
@@ -224,18 +233,23 @@ class Locator:
         xy, nearest = self.positions(distance, (k,), c)
         return xy[0], max(float(self.sigma[c] * nearest), MIN_SIGMA)
 
-    def widened(self, xy, sigma, c):
+    def widened(self, xy, sigma, c, mismatch=math.nan):
         """
         Return the sigma (m) of an answer ``xy`` of class c, widened.
 
         hypot(sigma, edge_sigma * side ** EDGE_POWER), side the answer's
-        one-sidedness among c's references: the 95 % circle's sigma.
-        ``sigma``: the k-NN's (:meth:`weighted`).
+        one-sidedness among c's references, and hypot with
+        :data:`MISMATCH_SIGMA_M` when the scan's ``mismatch``
+        (:meth:`relative_mismatch`; NaN: not known) is above
+        :data:`MISMATCH_WIDE`: the 95 % circle's sigma. ``sigma``: the
+        k-NN's (:meth:`weighted`).
         """
-        if not self.edge_sigma or not np.isfinite(xy).all():
-            return sigma
-        return math.hypot(sigma, self.edge_sigma *
-                          self.one_sidedness(xy, c) ** EDGE_POWER)
+        if self.edge_sigma and np.isfinite(xy).all():
+            sigma = math.hypot(sigma, self.edge_sigma *
+                               self.one_sidedness(xy, c) ** EDGE_POWER)
+        if mismatch > MISMATCH_WIDE:
+            sigma = math.hypot(sigma, MISMATCH_SIGMA_M)
+        return sigma
 
     def one_sidedness(self, xy, c):
         """

@@ -192,8 +192,8 @@ class PlaceModel:
         Return (xy (2,), sigma m, P(covered) or None, k-NN sigma m, mismatch).
 
         Of one scan of class c: ``sigma`` is its 95 % circle's (widened at
-        the survey's edge, :meth:`.locator.Locator.widened`), the k-NN
-        sigma the one before. ``columns``/``rssi``: its APs known to the
+        the survey's edge and where it sounds unlike the survey,
+        :meth:`.locator.Locator.widened`), the k-NN sigma the one before. ``columns``/``rssi``: its APs known to the
         model and their readings (dBm); ``unknown``: how many more it
         heard. The probability is None without a coverage model (or
         ``coverage`` false), and for a scan with no AP the model knows
@@ -206,8 +206,8 @@ class PlaceModel:
         distance = locator.distances(
             columns, signal(rssi, locator.representation), c)
         xy, knn = locator.weighted(distance, locator.neighbours, c)
-        sigma = locator.widened(xy, knn, c)
         mismatch = locator.relative_mismatch(columns, rssi, c, distance)
+        sigma = locator.widened(xy, knn, c, mismatch)
         if self.coverage is None or not coverage or not len(columns):
             return xy, sigma, None, knn, mismatch
         x = features(locator, distance, c,
