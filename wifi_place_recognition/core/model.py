@@ -193,7 +193,8 @@ class PlaceModel:
 
         Of one scan of class c: ``sigma`` is its 95 % circle's (widened at
         the survey's edge and where it sounds unlike the survey,
-        :meth:`.locator.Locator.widened`), the k-NN sigma the one before. ``columns``/``rssi``: its APs known to the
+        :meth:`.locator.Locator.widened`), the k-NN sigma the one before.
+        ``columns``/``rssi``: its APs known to the
         model and their readings (dBm); ``unknown``: how many more it
         heard. The probability is None without a coverage model (or
         ``coverage`` false), and for a scan with no AP the model knows
