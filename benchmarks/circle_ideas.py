@@ -53,15 +53,13 @@ them passed again: few of their scans lie off the survey):
 Per pair: the share of the test scans inside their circle (all, in holes,
 covered), the cut model's ROC AUC against the scans in holes beside the
 model's own, and e; of the scans in holes, the median one-sidedness and
-P(covered) of those the default circle misses and holds. With
-``--panel``, also the default and the loudness widenings on each panel
-dataset's test file (another day; the model trained by ``train_model
---seed 0``, UJIIndoorLoc the shipped model), where a widening must not
-push a circle past 0.98. Table on stdout, JSON in
-``benchmarks/results/circle-ideas.json``.
-
-The loudness and mismatch widenings are
-scored on the circle before round 29. ``--panel`` shows those chosen.
+P(covered) of those the circle before round 29 misses and holds (every
+idea but the default widens that circle). With ``--panel``, also the
+default, the circle before round 29 and every loudness and mismatch
+widening on each panel dataset's test file (another day; the model
+trained by ``train_model --seed 0``, UJIIndoorLoc the shipped model),
+where a widening must not push a circle past 0.98; those chosen are
+printed. Table on stdout, JSON in ``benchmarks/results/circle-ideas.json``.
 
     python benchmarks/circle_ideas.py [--data ../shared/datasets/robot]
                                       [--panel]
