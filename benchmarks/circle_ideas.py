@@ -15,8 +15,8 @@ them passed again: few of their scans lie off the survey):
 
 - **default**: the package's circle (the k-NN sigma widened at the
   survey's edge by ``edge_sigma_m`` times the one-sidedness to the 4th,
-  and since round 29 by MISMATCH_SIGMA_M where the scan sounds more than
-  MISMATCH_WIDE times as unlike its references as the survey's usual).
+  and since round 29 by 4 m where the scan sounds more than 1.4 times as
+  unlike its references as the survey's usual: ``core/locator.py``).
 - **before round 29**: the same without the mismatch's widening; every
   idea below widens this one.
 - **edge from cut places**: that edge widening calibrated on the cut
@@ -80,7 +80,7 @@ from wifi_place_recognition.core.coverage import (
 from wifi_place_recognition.core.evaluation import align
 from wifi_place_recognition.core.locator import (
     calibrated_edge_sigma, EDGE_POWER, least_widening, LEVELS, Locator,
-    MISMATCH_SIGMA_M, MISMATCH_WIDE, R95)
+    R95)
 from wifi_place_recognition.core.preprocessing import signal, signal_dbm
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.training.config import TrainConfig
@@ -123,11 +123,10 @@ def mismatch_name(k, w):
     return f'mismatch {k:g} x, {w:g} m'
 
 
-def before(circle, mismatch):
-    """Return the circles' sigma without the mismatch's widening."""
-    wide = np.nan_to_num(mismatch, nan=0.0) > MISMATCH_WIDE
-    return np.where(wide, np.sqrt(np.maximum(
-        circle ** 2 - MISMATCH_SIGMA_M ** 2, 0.0)), circle)
+def before(model, xy, knn, classes):
+    """Return each answer's circle sigma without the mismatch's widening."""
+    return np.array([model.position.widened(a, k, c)
+                     for a, k, c in zip(xy, knn, classes)])
 
 
 def mismatch_circles(circle, mismatch):
@@ -272,12 +271,12 @@ def pair(model, survey_csv, test, kept, calibrated):
     ``calibrated``: the survey's :func:`calibrated_loud_m`.
     """
     rssi = align(model, test.fp)
-    proba, xy, circle, p, mismatch = model.predict_positions(
+    proba, xy, default, p, mismatch = model.predict_positions(
         rssi, coverage=True)
-    default, circle = circle, before(circle, mismatch)
     loud = excesses(model.position, rssi, proba.argmax(axis=1))
     loud_m, loud_scans = calibrated
     knn = model.predict_positions(rssi, widened=False)[2]
+    circle = before(model, xy, knn, proba.argmax(axis=1))
     side = np.array([model.position.one_sidedness(a, c)
                      if np.isfinite(a).all() else np.nan
                      for a, c in zip(xy, proba.argmax(axis=1))])
@@ -372,7 +371,8 @@ def panel(root, folder, shown):
         rssi = align(model, test)
         proba, xy, default, _, mismatch = model.predict_positions(
             rssi, coverage=True)
-        circle = before(default, mismatch)
+        circle = before(model, xy, model.predict_positions(
+            rssi, widened=False)[2], proba.argmax(axis=1))
         error = np.linalg.norm(xy - test.position, axis=1)
         ok = np.isfinite(error)
         loud_m, loud_scans = calibrated_loud_m(model, train)
