@@ -138,13 +138,13 @@ def working_streams(model, run):
     """
     Return W's scan stream, fused stream (seed 0) and places.
 
-    The scans' k-NN sigma, as the monitor reads it (not widened), and
-    their coverage probability (the APs the model lacks counted).
+    The scans' k-NN sigma, as the monitor reads it (not widened), their
+    coverage probability (the APs the model lacks counted) and relative
+    mismatch, which the filter and the monitor read.
     """
-    proba, xy, sigma, coverage, mismatch = scan_answers(model, run.fp,
-                                                        widened=False)
-    scans = (run.stamps, xy, sigma, coverage)
-    fxy, fyaw, fcov = fuse_offline(run.odometry, (*scans, mismatch),
+    proba, *answers = scan_answers(model, run.fp, widened=False)
+    scans = (run.stamps, *answers)
+    fxy, fyaw, fcov = fuse_offline(run.odometry, scans,
                                    Fusion(model.fusion, seed=0))
     places = [model.classes[c] for c in proba.argmax(axis=1)]
     return scans, (run.stamps, fxy, fyaw, fcov), places

@@ -36,9 +36,11 @@ protocol: ``benchmarks/fusion.py``'s survey_holes).
   below; before round 25 only the fused poses did).
 
 Each scan reaches the witness as classifier_node sends it to the monitor:
-its position, k-NN sigma and coverage probability (the APs the model
-lacks counted). A scan wider than max_scan_sigma testifies only where
-its coverage probability says it is on the survey.
+its position, k-NN sigma, coverage probability (the APs the model lacks
+counted) and relative mismatch. A scan that sounds unlike the survey
+(``core.coverage.unlike_survey``, since round 30) testifies nothing; one
+wider than max_scan_sigma testifies only where its coverage probability
+says it is on the survey.
 
 Every building's runs are scored with the node's defaults (any folder of
 runs, one building too: ``fusion.py``'s ``--data``). With two buildings or
@@ -177,16 +179,10 @@ def scan_stream(model, run):
     The k-NN's sigma, as classifier_node gives it to the monitor
     (``scan_knn_sigma_m``), not widened at the survey's edge, and the
     coverage probability (NaN without a coverage model), the APs the
-    model lacks counted as the node counts them; the mismatch, which
-    the node's filter reads (the monitor reads the first four:
-    :func:`to_monitor`).
+    model lacks counted as the node counts them, and the mismatch (the
+    node's filter and the monitor read it all).
     """
     return (run.stamps, *scan_answers(model, run.fp, widened=False)[1:])
-
-
-def to_monitor(scans):
-    """Return what the monitor reads of :func:`scan_stream`'s answers."""
-    return scans[:4]
 
 
 def survey(model):
@@ -350,7 +346,7 @@ def window(stream, t0, local):
 def judged(local, fused, scans, survey_xy, t0, params):
     """Return the judgements of an episode's window."""
     return judge_offline(window(local, t0, local), window(fused, t0, local),
-                         params, scans=to_monitor(window(scans, t0, local)),
+                         params, scans=window(scans, t0, local),
                          survey=survey_xy)
 
 
@@ -380,7 +376,7 @@ def evaluate(case, params):
            'inside': len(case.inside), 'startup': []}
     for key, streams in case.fused.items():
         counts = [len(alarms(judge_offline(
-            case.local, f, params, scans=to_monitor(case.scans[key]),
+            case.local, f, params, scans=case.scans[key],
             survey=case.survey[key]))) for f in streams]
         out['false_alarms'][key] = {'alarms': counts, 'per_hour': float(
             np.mean(counts) / hours)}
@@ -404,7 +400,7 @@ def evaluate(case, params):
                 case.survey[key], t0, params))
     for f in case.fused['full']:
         first = next((j for j in judge_offline(
-            None, f, params, scans=to_monitor(case.scans['full']),
+            None, f, params, scans=case.scans['full'],
             survey=case.survey['full']) if j.seed), None)
         s = {'delay_s': math.inf}
         if first is not None:

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from ros_helpers import running_node
 from wifi_place_recognition.core.evaluation import align, unknown_aps
-from wifi_place_recognition.core.locator import (MISMATCH_SIGMA_M,
-                                                 MISMATCH_WIDE)
+from wifi_place_recognition.core.coverage import unlike_survey
+from wifi_place_recognition.core.locator import MISMATCH_SIGMA_M
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.ros.messages import status_values
 
@@ -95,7 +95,7 @@ def test_place_carries_each_scans_coverage(ros, tmp_path):
         edge = np.array([model.position.widened(xy[r], narrow[r],
                                                 proba[r].argmax())
                          for r in rows])
-        unlike = mismatch[rows] > MISMATCH_WIDE
+        unlike = unlike_survey(mismatch[rows])
         assert 0 < unlike.sum() < len(rows)
         np.testing.assert_allclose(
             sigmas, np.where(unlike, np.hypot(edge, MISMATCH_SIGMA_M), edge),

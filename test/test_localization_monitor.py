@@ -338,7 +338,7 @@ def test_no_seed_while_the_scans_of_the_last_minute_lie_aside(monitor, ros):
     assert len(m.initial) == 1
 
 
-def place_answer(t, xy, sigma, knn_sigma=None, coverage=None):
+def place_answer(t, xy, sigma, knn_sigma=None, coverage=None, mismatch=None):
     """Return a ~/place answer as classifier_node sends it (some keys)."""
     values = [key_value('building', 0), key_value('floor', 0),
               key_value('scan_x', f'{xy[0]:.3f}'),
@@ -349,6 +349,9 @@ def place_answer(t, xy, sigma, knn_sigma=None, coverage=None):
     if coverage is not None:       # a number, or a string as it is sent
         values.append(key_value('coverage', coverage if isinstance(
             coverage, str) else f'{coverage:.4f}'))
+    if mismatch is not None:       # a number, or a string as it is sent
+        values.append(key_value('mismatch', mismatch if isinstance(
+            mismatch, str) else f'{mismatch:.3f}'))
     msg = DiagnosticArray(status=[DiagnosticStatus(
         name='classifier_node: place', values=values)])
     msg.header.stamp.sec = int(t)
@@ -412,6 +415,46 @@ def test_a_wide_scan_testifies_when_its_coverage_says_on_the_survey(
     m.close = lambda: None
     assert "scan refused (1 so far): coverage '1.5' is not a " \
         'probability' in log, log
+
+
+def test_a_scan_that_sounds_unlike_the_survey_testifies_nothing(
+        monitor, ros):
+    # sure scans, likely covered, 20-30 m off a surveyed localiser pose:
+    # sounding unlike the survey (a survey hole, the scans snapped to its
+    # edge) they testify nothing; like it, they tell the kidnap; a
+    # mismatch that is not a ratio: refused, counted, named
+    here, m, answers = surveyed_monitor(monitor, ros, 'mismatch_monitor')
+    refs = survey_of(load_model(default_model_path()), 'map')['map']
+    distance = np.linalg.norm(refs - here, axis=1)
+    far = refs[np.flatnonzero((distance > 20) & (distance < 30))[0]]
+    for k in range(30):
+        m.send_local(pose(T0 + k, *here, 0.0))
+        answers.publish(place_answer(T0 + k, far, 1.5, coverage=0.9,
+                                     mismatch=2.0))
+        m.spin()
+    unlike = 'scan unlike the survey (mismatch 2.00 times its usual)'
+    assert wait_until(lambda: m.latest_status()['reason'] == unlike, 30,
+                      ros)
+    assert m.states[-1] == 'cannot_tell', m.states
+    for k in range(30, 60):
+        m.send_local(pose(T0 + k, *here, 0.0))
+        answers.publish(place_answer(T0 + k, far, 1.5, coverage=0.9,
+                                     mismatch=1.0))
+        m.spin()
+    m.wait_state('lost')
+    assert 'from the WiFi scans' in m.latest_status()['reason']
+    for k, bad in enumerate(('-1', 'loud')):
+        answers.publish(place_answer(T0 + 60 + k, far, 1.5, coverage=0.9,
+                                     mismatch=bad))
+    assert wait_until(lambda: m.latest_status()['bad_scans'] == '2', 30,
+                      ros)
+    ros.destroy_publisher(answers)
+    assert m.verdicts == [False, True, False], m.verdicts
+    assert m.latest_status()['scans'] == '60'
+    log = m.close()
+    m.close = lambda: None
+    assert "scan refused (1 so far): mismatch '-1' is not a ratio " \
+        '(>= 0 or nan)' in log, log
 
 
 def test_bad_localiser_messages_are_counted_named_and_left_out(

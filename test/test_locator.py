@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from wifi_place_recognition.core.artifact import (_digest, load_model,
                                                   ModelFileError, save_model)
+from wifi_place_recognition.core.coverage import UNLIKE_SURVEY_ABOVE
 from wifi_place_recognition.core.locator import (calibrated_edge_sigma,
                                                  calibrated_sigma, Locator,
                                                  MAX_EDGE_SIGMA_M,
                                                  MAX_MISMATCH_DB,
-                                                 MISMATCH_SIGMA_M,
-                                                 MISMATCH_WIDE, R95)
+                                                 MISMATCH_SIGMA_M, R95)
 from wifi_place_recognition.core.preprocessing import signal
 
 
@@ -233,8 +233,9 @@ def test_the_circle_widens_where_the_scan_sounds_unlike_the_survey():
     distance = np.full(21, 5.0)
     distance[0] = 3.0                   # at the corridor's end: side 1
     xy, knn = wide.weighted(distance, 1, 0)
-    for mismatch, extra in ((math.nan, 0.0), (0.5, 0.0), (MISMATCH_WIDE, 0.0),
-                            (MISMATCH_WIDE + 0.01, MISMATCH_SIGMA_M),
+    above = UNLIKE_SURVEY_ABOVE
+    for mismatch, extra in ((math.nan, 0.0), (0.5, 0.0), (above, 0.0),
+                            (above + 0.01, MISMATCH_SIGMA_M),
                             (5.0, MISMATCH_SIGMA_M)):
         assert plain.widened(xy, knn, 0, mismatch) == pytest.approx(
             np.hypot(3.0, extra), rel=1e-6)

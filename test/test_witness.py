@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 import pytest
+from wifi_place_recognition.core.coverage import UNLIKE_SURVEY_ABOVE
 from wifi_place_recognition.core.filter.particles import UNKNOWN_VARIANCE
 from wifi_place_recognition.core.witness import (AGREES, CANNOT_TELL,
                                                  DISAGREES, LOST,
@@ -173,6 +174,42 @@ def test_a_wide_scan_testifies_when_its_coverage_says_on_the_survey():
         assert Witness(p, survey).scan(0, 'map', [0, 0], 1.5,
                                        coverage) is None
     assert Witness(p, survey).scan(0, 'map', [0, 0], 1.5, 1.0) is not None
+
+
+def test_a_scan_that_sounds_unlike_the_survey_testifies_nothing():
+    survey = {'map': np.column_stack([np.arange(0, 50, 0.5),
+                                      np.zeros(100)])}
+    p = WitnessParams()
+    above = UNLIKE_SURVEY_ABOVE
+
+    def scans(mismatch, coverage=0.9, fused=False):
+        """Localiser at the truth, sure scans 30 m off; fused poses too."""
+        w = Witness(p, survey)
+        for k in range(40):
+            xy, yaw = truth(k)
+            w.localiser(k, 'map', xy, yaw, cov(0.1))
+            w.scan(k, 'map', xy + [0, 30.0], 1.5, coverage, mismatch)
+            if fused:
+                w.fused(k, 'map', xy + [0, 30.0], yaw, cov())
+        return w
+    # sure, likely covered, but sounding unlike the survey: no evidence,
+    # and the fused pose built on such scans neither
+    for fused, reason in ((False, 'scan unlike the survey (mismatch 1.41 '
+                                  'times its usual)'),
+                          (True, 'off the survey (5 of the last 5 scans do '
+                                 'not testify)')):
+        w = scans(above + 0.01, fused=fused)
+        assert w.ok and w.evidence['scans'] == w.evidence['fused'] == 0
+        assert (w.state, w.last.reason) == (CANNOT_TELL, reason)
+    # up to the threshold, or not known: the scans testify
+    for mismatch in (above, 0.5, math.nan, None):
+        assert scans(mismatch).ok is False
+    # a mismatch that is not a ratio is refused
+    for mismatch in (-0.1, math.inf, 'loud'):
+        assert Witness(p, survey).scan(0, 'map', [0, 0], 1.5, 0.9,
+                                       mismatch) is None
+    assert Witness(p, survey).scan(0, 'map', [0, 0], 1.5, 0.9,
+                                   0.0) is not None
 
 
 def test_a_silent_localiser_is_lost_only_if_the_robot_moved():

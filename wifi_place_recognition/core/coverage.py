@@ -12,7 +12,8 @@ Training fits it on the survey alone
 (:mod:`wifi_place_recognition.training.coverage`): the
 cross-validation folds hold out stretches of the survey, and each held-out
 scan is labelled covered when a kept scan lies near it. :func:`uncovered`
-is the one rule that calls a probability off the survey. Numpy only.
+is the one rule that calls a probability off the survey,
+:func:`unlike_survey` the one that calls a scan's sound off it. Numpy only.
 """
 
 from dataclasses import dataclass
@@ -33,6 +34,15 @@ EDGE_RADIUS_M = 5.0
 #: survey (:func:`uncovered`: survey_gaps's stretches of a run without
 #: positions, classifier_node's ``scans_off_survey``).
 OFF_SURVEY_BELOW = 0.5
+#: A scan whose mismatch over the survey's usual
+#: (:meth:`.locator.Locator.relative_mismatch`) is above this was likely
+#: taken where the survey never went, however sure its answer looks
+#: (:func:`unlike_survey`: its 95 % circle is widened, it testifies
+#: nothing to the witness). Chosen for the circle on the robot runs
+#: (``benchmarks/circle_ideas.py``: the most circles within 90-98 % on
+#: both buildings, none of the panel's test files moved farther from
+#: that band).
+UNLIKE_SURVEY_ABOVE = 1.4
 
 
 def uncovered(probability):
@@ -43,6 +53,15 @@ def uncovered(probability):
     numpy bool for one number.
     """
     return ~(np.asarray(probability, np.float64) >= OFF_SURVEY_BELOW)
+
+
+def unlike_survey(mismatch):
+    """
+    Return True if a scan's relative mismatch says off the survey.
+
+    Above :data:`UNLIKE_SURVEY_ABOVE`; NaN (not known) is not.
+    """
+    return mismatch > UNLIKE_SURVEY_ABOVE
 
 
 def distance_to_survey(xy, survey_xy):

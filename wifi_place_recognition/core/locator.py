@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from .coverage import EDGE_RADIUS_M, one_sidedness
+from .coverage import EDGE_RADIUS_M, one_sidedness, unlike_survey
 from .preprocessing import signal, signal_dbm, SIGNALS
 
 #: Distances the k-NN can use: Euclidean, or Sorensen (Bray-Curtis),
@@ -48,13 +48,9 @@ MAX_EDGE_SIGMA_M = 15.0
 #: with survey holes) against 2: as many circles within 90-98 % and
 #: none widened past 98 % that was not already.
 EDGE_POWER = 4
-#: A scan whose :meth:`Locator.relative_mismatch` is above this was likely
-#: taken where the survey never went, however sure its answer looks ...
-MISMATCH_WIDE = 1.4
-#: ... and its sigma is widened by this (m, in quadrature). Chosen on the
-#: robot runs (``benchmarks/circle_ideas.py``: the most circles within
-#: 90-98 % on both buildings, none of the panel's test files moved
-#: farther from that band).
+#: A scan that sounds unlike the survey (:func:`.coverage.unlike_survey`)
+#: has its sigma widened by this (m, in quadrature). Chosen on the robot
+#: runs with the threshold (``benchmarks/circle_ideas.py``).
 MISMATCH_SIGMA_M = 4.0
 
 
@@ -80,8 +76,9 @@ class Locator:
     off the survey (:func:`calibrated_edge_sigma`; 0: not widened).
     ``usual_mismatch`` (dB): the median :meth:`mismatch` of held-out scans
     on covered ground, what another day's scans there show too (0: not
-    known); a scan that sounds more than :data:`MISMATCH_WIDE` times as
-    unlike its references is widened by :data:`MISMATCH_SIGMA_M` too.
+    known); a scan that sounds unlike the survey
+    (:func:`.coverage.unlike_survey`) is widened by
+    :data:`MISMATCH_SIGMA_M` too.
     """
 
     origin: np.ndarray    # float64 (2,)
@@ -240,14 +237,14 @@ class Locator:
         hypot(sigma, edge_sigma * side ** EDGE_POWER), side the answer's
         one-sidedness among c's references, and hypot with
         :data:`MISMATCH_SIGMA_M` when the scan's ``mismatch``
-        (:meth:`relative_mismatch`; NaN: not known) is above
-        :data:`MISMATCH_WIDE`: the 95 % circle's sigma. ``sigma``: the
-        k-NN's (:meth:`weighted`).
+        (:meth:`relative_mismatch`; NaN: not known) says it sounds unlike
+        the survey (:func:`.coverage.unlike_survey`): the 95 % circle's
+        sigma. ``sigma``: the k-NN's (:meth:`weighted`).
         """
         if self.edge_sigma and np.isfinite(xy).all():
             sigma = math.hypot(sigma, self.edge_sigma *
                                self.one_sidedness(xy, c) ** EDGE_POWER)
-        if mismatch > MISMATCH_WIDE:
+        if unlike_survey(mismatch):
             sigma = math.hypot(sigma, MISMATCH_SIGMA_M)
         return sigma
 

@@ -17,14 +17,16 @@ evidence:
   ``max_fused_sd`` (a filter that just started, or one whose recent scans
   lie metres aside of it: :mod:`.filter.pose_spread`) is no evidence
   either way: it could not tell the localiser a few metres off,
-  nor is one while most recent scans do not testify (a scan unlike every
-  surveyed one that the coverage probability does not call covered says
-  the robot is off the survey), where the scans snap
-  to the nearest surveyed place and may drag the filter with them;
+  nor is one while most recent scans do not testify (a scan that sounds
+  unlike the survey, or one unlike every surveyed one that the coverage
+  probability does not call covered, says the robot is off the survey),
+  where the scans snap to the nearest surveyed place and may drag the
+  filter with them;
 - the scans: the same with the scan's own sigma and ``scan_floor_sd``, and
-  only a scan that testifies (:func:`.witness_testimony.scan_doubt`: its
-  sigma up to ``max_scan_sigma``, or its coverage probability says it is
-  on the survey) where the survey covers the localiser's
+  only a scan that testifies (:func:`.witness_testimony.scan_doubt`: it
+  does not sound unlike the survey, and its sigma is up to
+  ``max_scan_sigma`` or its coverage probability says it is on the
+  survey) where the survey covers the localiser's
   position (a reference within ``coverage_m``): a scan taken far from the
   survey snaps to the nearest surveyed place, so there it testifies
   nothing. The scans do not wait for the filter, which follows a
@@ -167,21 +169,23 @@ class Witness:
         self.last = judgement
         return judgement
 
-    def scan(self, stamp, frame, xy, sigma, coverage=math.nan):
+    def scan(self, stamp, frame, xy, sigma, coverage=math.nan,
+             mismatch=math.nan):
         """
         Take one scan's own position and sigma (m); return a Judgement.
 
-        ``coverage``: its coverage probability (NaN or None: none). None
-        if no judgement is due, or the scan is not valid
-        (:func:`.witness_inputs.scan_is_valid`).
+        ``coverage``: its coverage probability, ``mismatch``: its relative
+        mismatch (NaN or None: none). None if no judgement is due, or the
+        scan is not valid (:func:`.witness_inputs.scan_is_valid`).
         """
         try:
-            coverage = math.nan if coverage is None else float(coverage)
+            coverage, mismatch = (math.nan if v is None else float(v)
+                                  for v in (coverage, mismatch))
         except (TypeError, ValueError):
             return None
-        if not scan_is_valid(stamp, xy, sigma, coverage):
+        if not scan_is_valid(stamp, xy, sigma, coverage, mismatch):
             return None
-        doubt = scan_doubt(sigma, coverage, self.params)
+        doubt = scan_doubt(sigma, coverage, mismatch, self.params)
         self.recent.append(not doubt)
         stamp, xy = float(stamp), np.asarray(xy, np.float64)
         self.streams.scan(stamp, frame, xy)

@@ -99,12 +99,19 @@ def coverage_is_valid(coverage):
     return math.isnan(coverage) or 0 <= coverage <= 1
 
 
-def scan_is_valid(stamp, xy, sigma, coverage):
+def mismatch_is_valid(mismatch):
+    """Return True if a scan's relative mismatch is finite >= 0 or NaN."""
+    return math.isnan(mismatch) or 0 <= mismatch < math.inf
+
+
+def scan_is_valid(stamp, xy, sigma, coverage, mismatch=math.nan):
     """
     Return True if a scan's stamp, x, y and sigma (m, >= 0) are finite.
 
-    Its coverage probability too must be valid (:func:`coverage_is_valid`).
+    Its coverage probability and relative mismatch too must be valid
+    (:func:`coverage_is_valid`, :func:`mismatch_is_valid`).
     """
     values = [stamp, *np.ravel(xy), sigma]
     return len(values) == 4 and all(map(math.isfinite, values)) and \
-        sigma >= 0 and coverage_is_valid(coverage)
+        sigma >= 0 and coverage_is_valid(coverage) and \
+        mismatch_is_valid(mismatch)

@@ -2,9 +2,9 @@
 What each witness testifies, and how far apart it says the localiser is.
 
 A scan testifies when :func:`scan_doubt` has nothing against it (a scan
-unlike every surveyed one, whose k-NN sigma grows with that, snaps to the
-nearest surveyed place: its sigma must be up to ``max_scan_sigma``, or
-its coverage probability say it was taken on the survey) and the survey
+taken off the survey snaps to the nearest surveyed place: it must not
+sound unlike the survey, and its sigma must be up to ``max_scan_sigma``,
+or its coverage probability say it was taken on the survey) and the survey
 covers the localiser's position (:func:`covered`). The
 distances are Mahalanobis distances under the sum of both covariances,
 plus floors for what neither knows and the distance the robot moved since
@@ -15,24 +15,28 @@ import math
 
 import numpy as np
 
-from .coverage import uncovered
+from .coverage import uncovered, unlike_survey
 from .filter.angles import wrap
 from .filter.particles import UNKNOWN_VARIANCE
 
 
-def scan_doubt(sigma, coverage, params):
+def scan_doubt(sigma, coverage, mismatch, params):
     """
     Return why a scan does not testify, or ''.
 
     The one rule for which scans testify (a scan's own, whatever the
-    localiser's pose): a scan off the survey, its k-NN sigma (m) above
-    ``max_scan_sigma`` (a scan unlike every surveyed one: the sigma grows
-    with that), unless its coverage probability (NaN: the model has no
-    coverage model) says it was taken on the survey
-    (:func:`.coverage.uncovered`). The probability alone silences no
-    scan: on another day it calls right scans on covered ground off the
-    survey.
+    localiser's pose): a scan off the survey, its relative ``mismatch``
+    above the survey's usual (:func:`.coverage.unlike_survey`; NaN: not
+    known), or its k-NN sigma (m) above ``max_scan_sigma`` (a scan unlike
+    every surveyed one: the sigma grows with that) unless its coverage
+    probability (NaN: the model has no coverage model) says it was taken
+    on the survey (:func:`.coverage.uncovered`). The probability alone
+    silences no scan: on another day it calls right scans on covered
+    ground off the survey.
     """
+    if unlike_survey(mismatch):
+        return (f'scan unlike the survey (mismatch {mismatch:.2f} times '
+                f'its usual)')
     if sigma <= params.max_scan_sigma:
         return ''
     if math.isnan(coverage):

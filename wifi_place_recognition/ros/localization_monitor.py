@@ -3,8 +3,8 @@
 
 Subscribes the localiser's pose (``localizer_topic``, e.g. AMCL's
 ``amcl_pose``), classifier_node's fused pose (``fused_topic``) and its
-answers (``place_topic``: each scan's own position, sigma and coverage
-probability), and feeds them to :class:`.core.witness.Witness`, which
+answers (``place_topic``: each scan's own position, sigma, coverage
+probability and relative mismatch), and feeds them to :class:`.core.witness.Witness`, which
 judges whether they agree (see there). Publishes its state on the
 latched ``~/status`` (``std_msgs/String``: ``agrees``, ``disagrees``
 (evidence gathering, not yet lost), ``cannot_tell``, ``lost``, or
@@ -47,7 +47,7 @@ from ..core.artifact import load_model, ModelFileError
 from ..core.resources import default_model_path
 from ..core.witness import (AGREES, CANNOT_TELL, DISAGREES, LOST, WAITING,
                             Witness)
-from ..core.witness_inputs import coverage_is_valid
+from ..core.witness_inputs import coverage_is_valid, mismatch_is_valid
 from .classifier_parameters import check_frame
 from .messages import key_value as _kv, pose_problem, seconds, yaw_of
 from .monitor_parameters import declare, WITNESS_FIELDS, witness_params
@@ -68,17 +68,30 @@ STATES = {WAITING: (DiagnosticStatus.WARN, 'no localiser pose yet'),
           LOST: (DiagnosticStatus.ERROR, 'localiser lost')}
 
 
-def coverage_of(values):
-    """
-    Return a ~/place answer's coverage probability, or None if it is bad.
+#: What a ~/place answer says of its scan beside the position and sigma:
+#: key, its check, what a valid one is (NaN or missing: none, a model
+#: without a coverage model or a usual mismatch, an older node).
+SCAN_EXTRAS = (('coverage', coverage_is_valid, 'a probability (0-1 or nan)'),
+               ('mismatch', mismatch_is_valid, 'a ratio (>= 0 or nan)'))
 
-    NaN when it has none (a model without a coverage model).
+
+def scan_extras(values):
     """
-    try:
-        value = float(values.get('coverage', 'nan'))
-    except ValueError:
-        return None
-    return value if coverage_is_valid(value) else None
+    Return a ~/place answer's (coverage, mismatch), or why one is bad.
+
+    (None, reason) when one does not read as :data:`SCAN_EXTRAS` says.
+    """
+    out = []
+    for key, valid, what in SCAN_EXTRAS:
+        text = values.get(key, 'nan')
+        try:
+            value = float(text)
+        except ValueError:
+            value = None
+        if value is None or not valid(value):
+            return None, f'{key} {text!r} is not {what}'
+        out.append(value)
+    return tuple(out), ''
 
 
 def frame_pattern(template):
@@ -272,23 +285,22 @@ class LocalizationMonitor(Node):
                     floor=int(values['floor']))
             except (KeyError, ValueError):
                 continue        # a rejected scan, or no position
-            coverage = coverage_of(values)
-            if coverage is None:
-                self._refuse_scan(values['coverage'])
+            extras, why = scan_extras(values)
+            if extras is None:
+                self._refuse_scan(why)
                 continue
             self.counts['scans'] += 1
             if self.witness.scan(seconds(msg.header.stamp), frame, xy,
-                                 sigma, coverage) is not None:
+                                 sigma, *extras) is not None:
                 self._update()
 
-    def _refuse_scan(self, coverage):
+    def _refuse_scan(self, why):
         self.counts['bad_scans'] += 1
         now = time.monotonic()          # throttled, as the poses' reasons
         if now - self._logged.get('bad_scans', -math.inf) >= THROTTLE_S:
             self._logged['bad_scans'] = now
             self.get_logger().warn(
-                f'scan refused ({self.counts["bad_scans"]} so far): '
-                f'coverage {coverage!r} is not a probability (0-1 or nan)')
+                f'scan refused ({self.counts["bad_scans"]} so far): {why}')
 
     # outputs --------------------------------------------------------------
     def _send_seed(self, msg, why):
