@@ -13,7 +13,7 @@ import subprocess
 import sys
 from types import SimpleNamespace
 
-from conftest import REPO
+from conftest import benchmark, REPO
 import numpy as np
 
 
@@ -70,3 +70,25 @@ def test_thresholds_tried_in_two_processes_are_those_in_one():
     assert json.dumps(tried_two) == json.dumps(tried_one)
     # the episodes were judged: the thresholds tried differ in delay
     assert len({t['delay_median_s'] for t in tried_one[:4]}) > 1
+
+
+def test_a_missed_episode_leaves_the_choice_to_the_delays_found(
+        monkeypatch):
+    # one episode no threshold finds (the localiser 0.5 m off): every
+    # candidate misses it, and the faster alarm must still win, not the
+    # grid's first (the sum of median and max delay was inf for all)
+    witness = benchmark('witness')
+    monkeypatch.setattr(witness, 'GRID', {'alarm': (60.0, 15.0)})
+    monkeypatch.setattr(witness, 'SEED_GRID', {'sure_s': (0.0,)})
+    cases = [case(0), case(1)]
+    for c in cases:
+        t, xy = c.local[0], c.truth[:, 1:3]
+        near = stream(t, xy + (t >= 100)[:, None] * [0.0, 0.5], 0.1)
+        c.episodes.append(('full', 'displaced', 0, 100.0, near,
+                           *c.episodes[0][5:]))
+    params, tried = witness.choose(cases, 1)
+    assert [t['missed'] for t in tried[:2]] == [2, 2]
+    assert math.isinf(tried[0]['delay_max_s'])
+    assert tried[1]['found_delay_median_s'] < \
+        tried[0]['found_delay_median_s']
+    assert params.alarm == 15.0
