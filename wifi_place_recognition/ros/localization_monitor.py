@@ -4,8 +4,9 @@
 Subscribes the localiser's pose (``localizer_topic``, e.g. AMCL's
 ``amcl_pose``), classifier_node's fused pose (``fused_topic``) and its
 answers (``place_topic``: each scan's own position, sigma, coverage
-probability and relative mismatch), and feeds them to :class:`.core.witness.Witness`, which
-judges whether they agree (see there). Publishes its state on the
+probability and relative mismatch), and feeds them to
+:class:`.core.witness.Witness`, which judges whether they agree (see
+there). Publishes its state on the
 latched ``~/status`` (``std_msgs/String``: ``agrees``, ``disagrees``
 (evidence gathering, not yet lost), ``cannot_tell``, ``lost``, or
 ``waiting`` before the localiser's first pose) and the verdict on the
