@@ -10,11 +10,12 @@ def replay(localiser, fused, params=None, frame='map', scans=None,
 
     ``localiser`` and ``fused``: (stamps (n,), xy (n, 2), yaw (n,),
     cov (n, 3, 3)) in stamp order, in ``frame`` (``localiser`` may be
-    None: it never published); ``scans``: (stamps, xy, sigma[, coverage])
-    or None; ``survey``: the surveyed positions (None: everywhere). Taken
-    in stamp order (the localiser's first, then the scans', at equal
-    stamps); rows the witness refuses (a NaN but the coverage, a coverage
-    outside 0-1) are skipped.
+    None: it never published); ``scans``: (stamps, xy, sigma[, coverage[,
+    mismatch]]) or None; ``survey``: the surveyed positions (None:
+    everywhere). Taken in stamp order (the localiser's first, then the
+    scans', at equal stamps); rows the witness refuses (a NaN but the
+    coverage's or the mismatch's, a coverage outside 0-1, a mismatch
+    below 0 or inf) are skipped.
     Every seed proposed is sent. Yield (stamp, judgement or None, the
     witness's state after it) for every event.
     """
