@@ -383,15 +383,20 @@ def test_scans_far_from_a_surveyed_localiser_pose_tell_a_kidnap(
     assert int(values['scans']) == 40
 
 
+def surveyed_spot_away(here):
+    """Return the first surveyed spot of the shipped model 20-30 m away."""
+    refs = survey_of(load_model(default_model_path()), 'map')['map']
+    distance = np.linalg.norm(refs - here, axis=1)
+    return refs[np.flatnonzero((distance > 20) & (distance < 30))[0]]
+
+
 def test_a_wide_scan_testifies_when_its_coverage_says_on_the_survey(
         monitor, ros):
     # as the kidnap above, the scans wider than max_scan_sigma: their
     # coverage probability decides (likely off the survey, they testify
     # nothing; likely on it, they do; not a probability: refused, counted)
     here, m, answers = surveyed_monitor(monitor, ros, 'coverage_monitor')
-    refs = survey_of(load_model(default_model_path()), 'map')['map']
-    distance = np.linalg.norm(refs - here, axis=1)
-    far = refs[np.flatnonzero((distance > 20) & (distance < 30))[0]]
+    far = surveyed_spot_away(here)
     for k in range(30):
         m.send_local(pose(T0 + k, *here, 0.0))
         answers.publish(place_answer(T0 + k, far, 3.5, coverage=0.1))
@@ -424,9 +429,7 @@ def test_a_scan_that_sounds_unlike_the_survey_testifies_nothing(
     # edge) they testify nothing; like it, they tell the kidnap; a
     # mismatch that is not a ratio: refused, counted, named
     here, m, answers = surveyed_monitor(monitor, ros, 'mismatch_monitor')
-    refs = survey_of(load_model(default_model_path()), 'map')['map']
-    distance = np.linalg.norm(refs - here, axis=1)
-    far = refs[np.flatnonzero((distance > 20) & (distance < 30))[0]]
+    far = surveyed_spot_away(here)
     for k in range(30):
         m.send_local(pose(T0 + k, *here, 0.0))
         answers.publish(place_answer(T0 + k, far, 1.5, coverage=0.9,
