@@ -30,6 +30,15 @@ ratio, the test scans' median ratio off the survey, and the ROC AUC of
 each scan's mismatch against the scans off the survey (the filter
 widens the scans whose recent mismatch is above the usual).
 
+And what ``survey_gaps`` would list for a run without positions (the
+test file in time order, or in file order without stamps), under each
+rule for a scan off the survey: the coverage probability below 0.5 (the
+tool's), the relative mismatch above 1.4 (``unlike_survey``: the
+circle's and the witness's), or either: the true stretches (at least
+``MIN_SCANS`` scans off the survey in a row) holding a scan the rule
+calls off, the stretches it lists holding no scan truly off, the share
+of scans it calls off and of the truly off ones.
+
     python benchmarks/coverage_check.py
 """
 
@@ -43,8 +52,9 @@ from wifi_place_recognition.core.artifact import load_model
 from wifi_place_recognition.core.atomic import atomic_write
 from wifi_place_recognition.core.coverage import (COVERED_M,
                                                   distance_by_place,
-                                                  uncovered)
+                                                  uncovered, unlike_survey)
 from wifi_place_recognition.core.evaluation import scan_answers
+from wifi_place_recognition.core.gaps import gaps, MIN_SCANS
 from wifi_place_recognition.core.resources import default_model_path
 from wifi_place_recognition.data.fingerprints import read_fingerprints
 from wifi_place_recognition.training.coverage import (auc, logit,
@@ -137,6 +147,42 @@ def mismatch(usual, ratio, covered):
             'auc_off': _finite(auc(ratio[known], ~covered[known]))}
 
 
+def stretches(covered, rules, stamps=None):
+    """
+    Return how ``survey_gaps``'s list would meet the truth (dict).
+
+    ``covered``: the truth per test scan; ``rules``: {name: True per scan
+    the rule calls off the survey}; ``stamps``: the scans' times (None:
+    file order), the order the tool reads them in.
+    """
+    order = np.arange(len(covered)) if stamps is None else \
+        np.argsort(np.asarray(stamps, np.float64), kind='stable')
+    off = ~np.asarray(covered, bool)[order]
+    truth = gaps(off, min_scans=MIN_SCANS)
+    out = {'true_stretches': len(truth), 'min_scans': MIN_SCANS}
+    for name, flags in rules.items():
+        flags = np.asarray(flags, bool)[order]
+        listed = gaps(flags, min_scans=MIN_SCANS)
+        out[name] = {
+            'found': sum(bool(flags[g.first:g.last + 1].any())
+                         for g in truth),
+            'listed': len(listed),
+            'listed_none_off': sum(not off[g.first:g.last + 1].any()
+                                   for g in listed),
+            'called_off_share': float(flags.mean()),
+            'recall': float(flags[off].mean()) if off.any() else None}
+    return out
+
+
+def rules(model, answers):
+    """Return each rule's scans off the survey ({name: bools})."""
+    out = {'mismatch': unlike_survey(answers[4])}
+    if model.coverage is not None:
+        out['coverage'] = uncovered(answers[3])
+        out['either'] = out['coverage'] | out['mismatch']
+    return out
+
+
 def leave_one_building_out(results):
     """
     Return, per building, the floor the others' mean ECE would choose.
@@ -225,14 +271,21 @@ def main():
                   f'scans {_cell(sound.get("covered_over_usual"), ".2f")}'
                   f' x, off {_cell(sound.get("off_over_usual"), ".2f")} x,'
                   f' AUC {_cell(sound.get("auc_off"), ".2f")}')
+            listed = stretches(truth, rules(model, answers),
+                               test.meta.get('TIMESTAMP'))
+            print(f'{key:16s} survey_gaps without positions: '
+                  f'{listed["true_stretches"]} true stretches; ' + '; '.join(
+                      f'{k}: {v["found"]} found, {v["listed_none_off"]} of '
+                      f'{v["listed"]} listed with none off' for k, v in
+                      listed.items() if isinstance(v, dict)))
             if model.coverage is None:
                 results[key] = {'model': basis, 'coverage_model': None,
-                                'mismatch': sound}
+                                'mismatch': sound, 'stretches': listed}
                 print(f'{key:16s} no coverage model')
                 continue
             r = results[key] = {'model': basis,
                                 **check(model, answers[3], truth),
-                                'mismatch': sound}
+                                'mismatch': sound, 'stretches': listed}
             print(f'{key:16s} {r["test_scans"]:6d} '
                   f'{r["covered_share"]:8.3f} {_cell(r["auc"]):>6s} '
                   f'{r["ece"]:6.3f} {r["judged_off_share"]:6.3f} '

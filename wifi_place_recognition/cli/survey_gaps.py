@@ -12,7 +12,7 @@ from ..core.artifact import load_model
 from ..core.evaluation import align, unknown_aps
 from ..core.coverage import (COVERED_M, OFF_SURVEY_BELOW,
                              distance_by_place, uncovered)
-from ..core.gaps import gaps
+from ..core.gaps import gaps, MIN_SCANS
 from ..core.resources import default_model_path
 from .common import (add_data_arguments, check_outputs, data_options,
                      json_ready, main_wrapper, read_data)
@@ -39,7 +39,7 @@ def main(argv=None):
     p.add_argument('--covered-m', type=float, default=COVERED_M,
                    metavar='M', help='a survey scan this close covers a '
                                      'scan (default: %(default)s m)')
-    p.add_argument('--min-scans', type=int, default=5, metavar='N',
+    p.add_argument('--min-scans', type=int, default=MIN_SCANS, metavar='N',
                    help='leave out stretches of fewer scans (default: '
                         '%(default)s)')
     p.add_argument('--plot', metavar='OUT.png', default=None,

@@ -14,6 +14,9 @@ import math
 
 import numpy as np
 
+#: The shortest stretch ``survey_gaps`` lists by default (scans).
+MIN_SCANS = 5
+
 
 @dataclass(frozen=True)
 class Gap:
