@@ -153,17 +153,19 @@ def stretches(covered, rules, stamps=None):
 
     ``covered``: the truth per test scan; ``rules``: {name: True per scan
     the rule calls off the survey}; ``stamps``: the scans' times (None:
-    file order), the order the tool reads them in.
+    file order), the order the tool reads them in. ``by_rule``: each
+    rule's figures.
     """
     order = np.arange(len(covered)) if stamps is None else \
         np.argsort(np.asarray(stamps, np.float64), kind='stable')
     off = ~np.asarray(covered, bool)[order]
     truth = gaps(off, min_scans=MIN_SCANS)
-    out = {'true_stretches': len(truth), 'min_scans': MIN_SCANS}
+    out = {'true_stretches': len(truth), 'min_scans': MIN_SCANS,
+           'by_rule': {}}
     for name, flags in rules.items():
         flags = np.asarray(flags, bool)[order]
         listed = gaps(flags, min_scans=MIN_SCANS)
-        out[name] = {
+        out['by_rule'][name] = {
             'found': sum(bool(flags[g.first:g.last + 1].any())
                          for g in truth),
             'listed': len(listed),
@@ -277,7 +279,7 @@ def main():
                   f'{listed["true_stretches"]} true stretches; ' + '; '.join(
                       f'{k}: {v["found"]} found, {v["listed_none_off"]} of '
                       f'{v["listed"]} listed with none off' for k, v in
-                      listed.items() if isinstance(v, dict)))
+                      listed['by_rule'].items()))
             if model.coverage is None:
                 results[key] = {'model': basis, 'coverage_model': None,
                                 'mismatch': sound, 'stretches': listed}

@@ -23,11 +23,12 @@ def test_stretches_found_and_listed_are_counted_in_time_order():
     found = check.stretches(~off[order], {k: v[order] for k, v in
                                           rules.items()}, stamps[order])
     assert found['true_stretches'] == 2 and found['min_scans'] == 5
+    by_rule = found['by_rule']
     assert {k: (v['found'], v['listed'], v['listed_none_off'])
-            for k, v in found.items() if isinstance(v, dict)} == {
+            for k, v in by_rule.items()} == {
         'a': (1, 1, 1), 'b': (1, 1, 0), 'c': (0, 1, 0)}
-    assert found['b']['recall'] == 7 / 17
-    assert found['a']['called_off_share'] == 6 / len(off)
+    assert by_rule['b']['recall'] == 7 / 17
+    assert by_rule['a']['called_off_share'] == 6 / len(off)
     # no stamps: the file's order is the run's
     plain = check.stretches(~off, rules)
     assert plain == found
