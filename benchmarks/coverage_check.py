@@ -176,7 +176,7 @@ def stretches(covered, rules, stamps=None):
     return out
 
 
-def rules(model, answers):
+def off_survey_rules(model, answers):
     """Return each rule's scans off the survey ({name: bools})."""
     out = {'mismatch': unlike_survey(answers[4])}
     if model.coverage is not None:
@@ -273,7 +273,7 @@ def main():
                   f'scans {_cell(sound.get("covered_over_usual"), ".2f")}'
                   f' x, off {_cell(sound.get("off_over_usual"), ".2f")} x,'
                   f' AUC {_cell(sound.get("auc_off"), ".2f")}')
-            listed = stretches(truth, rules(model, answers),
+            listed = stretches(truth, off_survey_rules(model, answers),
                                test.meta.get('TIMESTAMP'))
             print(f'{key:16s} survey_gaps without positions: '
                   f'{listed["true_stretches"]} true stretches; ' + '; '.join(
