@@ -227,7 +227,7 @@ def test_a_silent_localiser_is_lost_only_if_the_robot_moved():
 
 
 def test_seeds_at_start_up_once_sure_and_when_lost_once_per_holdoff():
-    p = WitnessParams(holdoff=30.0)
+    p = WitnessParams(holdoff=30.0, startup_sure_s=0.0)
     w = Witness(p)
     judged = drive(w, 5, local=None, fused_sd=3.0)
     assert not any(j.seed for j in judged) and w.ok is None
@@ -249,6 +249,39 @@ def test_seeds_at_start_up_once_sure_and_when_lost_once_per_holdoff():
     judged = drive(w, 30, start=30)
     found = next(j.stamp for j in judged if j.ok) - 30
     assert found == math.ceil(p.alarm / p.agree_sigmas) - 1, found
+
+
+def test_a_start_up_seed_waits_for_a_pose_sure_without_a_break():
+    """
+    A young filter's covariance narrows before its heading is right.
+
+    Sure from 5 s, wide once at 12 s, sure again from 13 s: the start-up
+    seed comes startup_sure_s (15, the default) after 13 s, not after 5;
+    0 seeds at once. A re-seed (the localiser lost) does not wait.
+    """
+    def start_up(params):
+        w = Witness(params)
+        sds = [3.0] * 5 + [0.5] * 7 + [3.0] + [0.5] * 40
+        for k, sd in enumerate(sds):
+            j = w.fused(k, 'map', *truth(k), cov(sd))
+            if j.seed:
+                return j.stamp, j.seed
+        return None
+
+    p = WitnessParams()
+    assert p.startup_sure_s == 15
+    assert start_up(p)[0] == 13 + 15
+    assert start_up(replace(p, startup_sure_s=0.0))[0] == 5
+    assert start_up(replace(p, startup_sure_s=60.0)) is None
+    # lost at once after a wide pose: the re-seed does not wait
+    w = Witness(p)
+    drive(w, 10, fused_sd=3.0)
+    judged = drive(w, 20, local=lambda k: (truth(k)[0] + [20, 0], 0.0),
+                   start=10)
+    seeds = [j for j in judged if j.seed]
+    lost = next(j.stamp for j in judged if j.ok is False)
+    assert [j.stamp for j in seeds] == [lost] and lost - 10 < 15
+    assert seeds[0].seed.startswith('lost')
 
 
 def test_no_seed_from_a_fused_pose_built_on_scans_off_the_survey():
@@ -317,7 +350,7 @@ def test_no_seed_while_the_scans_of_the_last_minute_lie_aside():
                    [aside if k < 50 else 0.0, 0.0], 1.0)
         return out
 
-    p = WitnessParams(holdoff=1000.0)
+    p = WitnessParams(holdoff=1000.0, startup_sure_s=0.0)
     assert p.sure_s == 60
     assert seeds(p) == [84]
     assert seeds(p, aside=0.0) == [50]
@@ -427,7 +460,8 @@ def test_judge_offline_takes_the_streams_in_stamp_order():
     judged = judge_offline(local, fused)
     assert judged[0].reason == 'no localiser pose'
     assert judged[-1].ok is False
-    assert judge_offline(None, fused)[0].seed.startswith('start-up')
+    seeds = [j.stamp for j in judge_offline(None, fused) if j.seed]
+    assert seeds[0] == WitnessParams().startup_sure_s    # sure from 0 s
 
 
 def test_a_fused_pose_too_wide_to_tell_5_m_apart_does_not_agree():

@@ -53,6 +53,7 @@ from test_witness_bench import case
 witness = benchmark('witness')
 witness.GRID = {'agree_sigmas': (3.0, 4.0), 'alarm': (15.0, 60.0)}
 witness.SEED_GRID = {'sure_sd': (0.5, 2.0), 'sure_s': (0.0, 60.0)}
+witness.HOLD_GRID = {'startup_sure_s': (0.0, 15.0)}
 cases = [case(0), case(1)]
 two = witness.choose(cases, 2)   # first: nothing held yet
 one = witness.choose(cases, 1)
@@ -65,7 +66,7 @@ def test_thresholds_tried_in_two_processes_are_those_in_one():
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     (one, tried_one), (two, tried_two) = json.loads(done.stdout)
-    assert len(tried_one) == 8
+    assert len(tried_one) == 10
     assert one == two
     assert json.dumps(tried_two) == json.dumps(tried_one)
     # the episodes were judged: the thresholds tried differ in delay
@@ -80,6 +81,7 @@ def test_a_missed_episode_leaves_the_choice_to_the_delays_found(
     witness = benchmark('witness')
     monkeypatch.setattr(witness, 'GRID', {'alarm': (60.0, 15.0)})
     monkeypatch.setattr(witness, 'SEED_GRID', {'sure_s': (0.0,)})
+    monkeypatch.setattr(witness, 'HOLD_GRID', {'startup_sure_s': (0.0,)})
     cases = [case(0), case(1)]
     for c in cases:
         t, xy = c.local[0], c.truth[:, 1:3]
@@ -92,3 +94,27 @@ def test_a_missed_episode_leaves_the_choice_to_the_delays_found(
     assert tried[1]['found_delay_median_s'] < \
         tried[0]['found_delay_median_s']
     assert params.alarm == 15.0
+
+
+def test_a_wrong_start_up_seed_counts_before_a_late_one(monkeypatch):
+    # the fused pose sure but 5 m aside for the first 20 s, wide once,
+    # then sure and right: no hold seeds at once, 5 m off; a hold of 45 s
+    # seeds right at 66 s, late. The late one must win (a late seed and
+    # a wrong one once counted alike, and the earlier won).
+    witness = benchmark('witness')
+    monkeypatch.setattr(witness, 'GRID', {'alarm': (60.0,)})
+    monkeypatch.setattr(witness, 'SEED_GRID', {'sure_s': (0.0,)})
+    monkeypatch.setattr(witness, 'HOLD_GRID',
+                        {'startup_sure_s': (0.0, 45.0)})
+    cases = [case(0), case(1)]
+    for c in cases:
+        t, xy = c.local[0], c.truth[:, 1:3]
+        aside = stream(t, xy + (t < 20)[:, None] * [0.0, 5.0], 0.5)
+        aside[3][20] = np.diag([9.0, 9.0, 0.05 ** 2])   # wide once
+        c.fused['full'] = [aside] * 3
+    params, tried = witness.choose(cases, 1)
+    no_hold, hold = tried[-2:]
+    assert no_hold['startup_wrong'] == 6 and no_hold['startup_late'] == 0
+    assert hold['startup_wrong'] == 0 and hold['startup_late'] == 6
+    assert hold['startup_max_s'] == 21 + 45
+    assert params.startup_sure_s == 45.0

@@ -55,10 +55,11 @@ A pose to seed the localiser with (:attr:`Judgement.seed`,
 survey (not while most recent scans do not testify, nor while the scans
 of the last ``sure_s`` seconds lie on average farther than ``sure_sd``
 from its track: a pose dragged by scans off the survey): at start-up,
-while no localiser message has been heard, and when the localiser is
-lost. The caller says when it sent one (:meth:`Witness.seeded`): the
-evidence is cleared (the localiser starts over) and no other is proposed
-for ``holdoff`` seconds.
+while no localiser message has been heard, once it has stayed sure for
+``startup_sure_s`` seconds, and when the localiser is lost. The caller
+says when it sent one (:meth:`Witness.seeded`): the evidence is cleared
+(the localiser starts over) and no other is proposed for ``holdoff``
+seconds.
 
 Bad localiser poses (:func:`.witness_inputs.pose_problem`: not finite,
 covariance not positive definite; :mod:`.witness_pairing`: stamps going
@@ -162,10 +163,9 @@ class Witness:
             return None
         judgement = self._judge_fused(pose)
         judgement.fused = pose
-        if not self._off_survey():
-            judgement.seed = self.seeding.propose(
-                pose, self.streams.heard, judgement, self.params,
-                self.streams.scan_offset)
+        judgement.seed = self.seeding.propose(
+            pose, self.streams.heard, judgement, self.params,
+            self.streams.scan_offset, self._off_survey())
         self.last = judgement
         return judgement
 

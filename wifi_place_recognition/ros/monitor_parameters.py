@@ -89,8 +89,8 @@ PARAMETERS = (
         description='send the fused pose on initialpose at start-up (no '
                     'localiser pose yet) and when the localiser is lost, '
                     'once the fused pose is sure (sure_sd, sure_yaw_deg, '
-                    'sure_s), not while most of the last 5 scans do not '
-                    'testify')),
+                    'sure_s; at start-up startup_sure_s), not while most '
+                    'of the last 5 scans do not testify')),
     _positive('agree_sigmas', 'a judgement this many standard deviations '
               'apart adds no evidence; farther adds, nearer takes away',
               _D.agree_sigmas, 100.0),
@@ -115,6 +115,10 @@ PARAMETERS = (
               'average within sure_sd of its track (a pose dragged by '
               'scans off the survey, not yet back, does not; 0: not '
               'asked)', _D.sure_s, 3600.0),
+    _positive('startup_sure_s', 'a start-up seed only from a fused pose '
+              'sure so many seconds without a break (a young filter\'s '
+              'covariance narrows before its heading is right; re-seeds do '
+              'not wait; 0: not asked)', _D.startup_sure_s, 3600.0),
     _positive('max_age', 'seconds after which a pose is old: the '
               'localiser\'s newest is silent (not compared), and WiFi '
               'cannot tell once its last comparison is this much older '
@@ -130,6 +134,7 @@ WITNESS_FIELDS = {'agree_sigmas': 'agree_sigmas', 'alarm': 'alarm',
                   'max_scan_sigma': 'max_scan_sigma',
                   'yaw_floor_deg': 'yaw_floor_sd', 'sure_sd': 'sure_sd',
                   'sure_yaw_deg': 'sure_yaw_sd', 'sure_s': 'sure_s',
+                  'startup_sure_s': 'startup_sure_s',
                   'max_age': 'max_age',
                   'silent_m': 'silent_m', 'holdoff': 'holdoff'}
 
