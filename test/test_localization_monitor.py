@@ -8,10 +8,10 @@ monitor runs in its own process (the shipped model's survey). The robot
 drives along x at 0.5 m/s; the fused pose is the truth with 0.5 m and 3
 degrees of spread (a kidnap: the scans' own positions on ``~/place``
 instead). Checked: the latched ``~/status`` and ``~/localization_ok``,
-the status on ``/diagnostics``, ``initialpose`` (none from a fused pose
-built on scans off the survey, nor while the last minute's scans lie
-aside of it), the log, and parameters refused in the parameters' own
-terms.
+the status on ``/diagnostics``, ``initialpose`` (at start-up once the
+fused pose has stayed sure for 15 s; none from a fused pose built on
+scans off the survey, nor while the last minute's scans lie aside of it),
+the log, and parameters refused in the parameters' own terms.
 """
 
 import math
@@ -273,12 +273,14 @@ def test_with_no_localiser_pose_the_sure_fused_pose_seeds_it(monitor, ros):
     m.spin(0.3)
     assert not m.initial
     assert m.latest_status()['localization_ok'] == 'false'
-    for k in range(10, 15):
-        m.step(k, fused_sd=0.5)
+    # sure from 10 s, wide once at 17 s, sure again from 18 s: the seed
+    # waits startup_sure_s (15 s) of a pose sure without a break
+    for k in range(10, 40):
+        m.step(k, fused_sd=3.0 if k == 17 else 0.5)
     assert wait_until(lambda: m.initial, 5, ros), 'no initial pose'
     seed = m.initial[0]
-    assert seed.header.stamp.sec == T0 + 10
-    x, y, _ = truth(10)
+    assert seed.header.stamp.sec == T0 + 18 + 15
+    x, y, _ = truth(18 + 15)
     p = seed.pose.pose.position
     assert math.hypot(p.x - x, p.y - y) < 2
     assert len(m.initial) == 1          # holdoff: once
