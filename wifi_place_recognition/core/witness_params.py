@@ -15,8 +15,8 @@ class WitnessParams:
 
     The defaults of the thresholds the benchmark chooses (agree_sigmas,
     alarm, floor_sd, max_scan_sigma, yaw_floor_sd, sure_sd, sure_yaw_sd,
-    sure_s, startup_sure_s) are those it chose on the robot runs of building b24, which
-    gave no false alarm on b14's (``benchmarks/witness.py``;
+    sure_s, startup_sure_s) are those it chose on the robot runs of
+    building b24, which gave no false alarm on b14's (``benchmarks/witness.py``;
     max_scan_sigma 4 m from round 13 to 19, level with 3 m on b14, and
     the default stayed 3 m; since the scans' coverage probability joined,
     b24 chooses 3 m; since round 24 it chooses alarm 30 and agree_sigmas

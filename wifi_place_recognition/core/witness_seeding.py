@@ -7,8 +7,8 @@ The fused pose, when it is sure (position standard deviation at most
 start-up, while no localiser message has been heard, once it has been
 sure for ``startup_sure_s`` seconds without a break, and when the
 localiser is lost; at most one per ``holdoff`` seconds after one was
-sent. The witness asks only while the fused pose is on the survey
-(:mod:`.witness`).
+sent; none while the pose is built on scans off the survey (the witness
+says so: :mod:`.witness`).
 
 The fused covariance comes from the last few scans' offsets. Scans from
 where the survey never went that moved as the robot did drag the pose
@@ -32,7 +32,7 @@ class Seeding:
         self.sure_since = None     # stamp since which the pose is sure
 
     def propose(self, pose, heard, judgement, params, scan_offset,
-                off_survey=''):
+                off_survey):
         """
         Return why to send the fused ``pose``, or '' (none).
 
@@ -41,7 +41,7 @@ class Seeding:
         the pose was just judged with; ``scan_offset(since, frame)``: how
         far the scans since then lie from the fused track on average (m;
         None: no scan), asked last; ``off_survey``: why the pose is built
-        on scans off the survey ('' : it is not), then none is proposed.
+        on scans off the survey ('': it is not; else none is proposed).
         """
         p = params
         sure = pose.sd <= p.sure_sd and pose.yaw_sd <= p.sure_yaw_sd
