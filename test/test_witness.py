@@ -284,6 +284,19 @@ def test_a_start_up_seed_waits_for_a_pose_sure_without_a_break():
     assert seeds[0].seed.startswith('lost')
 
 
+def test_a_restarted_clock_starts_the_seeding_over():
+    # a bag played again: the stamps start over while no localiser was
+    # heard. The new timeline's start-up seed comes after its own sure
+    # stretch, not after the old timeline's last seed plus the holdoff,
+    # nor never (the old stretch's start lies in its future)
+    p = WitnessParams(holdoff=30.0)
+    w = Witness(p)
+    seeds = [j.stamp for j in drive(w, 20, local=None) if j.seed]
+    assert seeds == [15]
+    seeds = [j.stamp for j in drive(w, 20, local=None, start=5) if j.seed]
+    assert seeds == [5 + 15]
+
+
 def test_no_seed_from_a_fused_pose_built_on_scans_off_the_survey():
     survey = {'map': np.column_stack([np.arange(0, 100, 0.5),
                                       np.zeros(200)])}

@@ -36,7 +36,9 @@ class Seeding:
         """
         Return why to send the fused ``pose``, or '' (none).
 
-        Called with every fused pose judged. ``heard``: a localiser
+        Called with every fused pose judged; a stamp before the last seed
+        sent or the sure stretch's start is a new timeline (a bag or a
+        simulation started again): both are forgotten. ``heard``: a localiser
         message arrived (even a refused one); ``judgement``: the verdict
         the pose was just judged with; ``scan_offset(since, frame)``: how
         far the scans since then lie from the fused track on average (m;
@@ -44,6 +46,8 @@ class Seeding:
         on scans off the survey ('': it is not; else none is proposed).
         """
         p = params
+        if pose.stamp < max(self.last_sent, self.sure_since or -math.inf):
+            self.last_sent, self.sure_since = -math.inf, None
         sure = pose.sd <= p.sure_sd and pose.yaw_sd <= p.sure_yaw_sd
         if not sure:
             self.sure_since = None
