@@ -46,7 +46,8 @@ class Seeding:
         on scans off the survey ('': it is not; else none is proposed).
         """
         p = params
-        if pose.stamp < max(self.last_sent, self.sure_since or -math.inf):
+        since = -math.inf if self.sure_since is None else self.sure_since
+        if pose.stamp < max(self.last_sent, since):
             self.last_sent, self.sure_since = -math.inf, None
         sure = pose.sd <= p.sure_sd and pose.yaw_sd <= p.sure_yaw_sd
         if not sure:
