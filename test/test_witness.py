@@ -285,16 +285,27 @@ def test_a_start_up_seed_waits_for_a_pose_sure_without_a_break():
 
 
 def test_a_restarted_clock_starts_the_seeding_over():
-    # a bag played again: the stamps start over while no localiser was
-    # heard. The new timeline's start-up seed comes after its own sure
-    # stretch, not after the old timeline's last seed plus the holdoff,
-    # nor never (the old stretch's start lies in its future)
-    p = WitnessParams(holdoff=30.0)
-    w = Witness(p)
-    seeds = [j.stamp for j in drive(w, 20, local=None) if j.seed]
-    assert seeds == [15]
-    seeds = [j.stamp for j in drive(w, 20, local=None, start=5) if j.seed]
-    assert seeds == [5 + 15]
+    """
+    A bag played again: the fused stamps go back, no localiser heard.
+
+    The new timeline's start-up seed comes after its own sure stretch:
+    not after the old timeline's last seed plus the holdoff, nor after
+    the old stretch's start, whether the stamps go back before it or
+    only before the newest one.
+    """
+    w = Witness(WitnessParams(holdoff=30.0))
+    assert [j.stamp for j in drive(w, 20, local=None) if j.seed] == [15]
+    assert [j.stamp for j in drive(w, 20, local=None, start=5)
+            if j.seed] == [5 + 15]
+    # no seed sent on the old timeline: only its sure stretch behind
+    p = WitnessParams(startup_sure_s=30.0)
+    for first, again in ((10, 0), (100, 110)):
+        w = Witness(p)
+        old = drive(w, 25, local=None, start=first)
+        assert not any(j.seed for j in old)
+        seeds = [j.stamp for j in drive(w, 40, local=None, start=again)
+                 if j.seed]
+        assert seeds == [again + 30], (first, again, seeds)
 
 
 def test_no_seed_from_a_fused_pose_built_on_scans_off_the_survey():

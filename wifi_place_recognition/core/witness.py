@@ -159,6 +159,8 @@ class Witness:
         if pose_problem(stamp, xy, yaw, cov) is not None:
             return None
         pose = Pose.of(stamp, frame, xy, yaw, cov)
+        if self.streams.starts_over(pose.stamp):
+            self.seeding = Seeding()    # no seed nor sure stretch behind
         if not self.streams.fused(pose, self.params.period):
             return None
         judgement = self._judge_fused(pose)

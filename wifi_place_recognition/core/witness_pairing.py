@@ -63,9 +63,13 @@ class Streams:
         self.local = Pose.of(stamp, frame, xy, yaw, cov)
         return None, restarted
 
+    def starts_over(self, stamp):
+        """Return True if a fused pose at ``stamp`` begins a new timeline."""
+        return bool(self.history) and stamp < self.history[-1][0]
+
     def fused(self, pose, period):
         """Add a fused Pose to the track; return True if a judgement is due."""
-        if self.history and pose.stamp < self.history[-1][0]:
+        if self.starts_over(pose.stamp):
             self.history.clear()        # a new timeline
             self.judged['fused'] = -math.inf
         self.history.append((pose.stamp, *pose.xy))

@@ -8,7 +8,8 @@ start-up, while no localiser message has been heard, once it has been
 sure for ``startup_sure_s`` seconds without a break, and when the
 localiser is lost; at most one per ``holdoff`` seconds after one was
 sent; none while the pose is built on scans off the survey (the witness
-says so: :mod:`.witness`).
+says so: :mod:`.witness`). A new timeline (a bag or a simulation started
+again) starts with a new :class:`Seeding`.
 
 The fused covariance comes from the last few scans' offsets. Scans from
 where the survey never went that moved as the robot did drag the pose
@@ -36,19 +37,15 @@ class Seeding:
         """
         Return why to send the fused ``pose``, or '' (none).
 
-        Called with every fused pose judged; a stamp before the last seed
-        sent or the sure stretch's start is a new timeline (a bag or a
-        simulation started again): both are forgotten. ``heard``: a localiser
-        message arrived (even a refused one); ``judgement``: the verdict
+        Called with every fused pose judged (sureness is seen at each
+        judgement, on the survey or not). ``heard``: a localiser message
+        arrived (even a refused one); ``judgement``: the verdict
         the pose was just judged with; ``scan_offset(since, frame)``: how
         far the scans since then lie from the fused track on average (m;
         None: no scan), asked last; ``off_survey``: why the pose is built
         on scans off the survey ('': it is not; else none is proposed).
         """
         p = params
-        since = -math.inf if self.sure_since is None else self.sure_since
-        if pose.stamp < max(self.last_sent, since):
-            self.last_sent, self.sure_since = -math.inf, None
         sure = pose.sd <= p.sure_sd and pose.yaw_sd <= p.sure_yaw_sd
         if not sure:
             self.sure_since = None
