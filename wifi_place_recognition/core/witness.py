@@ -163,11 +163,12 @@ class Witness:
             self.seeding = Seeding()    # no seed nor sure stretch behind
         if not self.streams.fused(pose, self.params.period):
             return None
-        judgement = self._judge_fused(pose)
+        off = self._off_survey()
+        judgement = self._judge_fused(pose, off)
         judgement.fused = pose
         judgement.seed = self.seeding.propose(
             pose, self.streams.heard, judgement, self.params,
-            self.streams.scan_offset, self._off_survey())
+            self.streams.scan_offset, off)
         self.last = judgement
         return judgement
 
@@ -298,7 +299,8 @@ class Witness:
                                    f'{age:.0f} s')
         return local, moved
 
-    def _judge_fused(self, pose):
+    def _judge_fused(self, pose, off):
+        """Judge a fused pose; ``off``: why it is off the survey, or ''."""
         p = self.params
         paired = self._paired(pose.stamp, 'fused')
         if isinstance(paired, Judgement):
@@ -311,7 +313,6 @@ class Witness:
         if pose.sd > p.max_fused_sd:
             return self._judgement(pose.stamp, f'fused pose too wide '
                                    f'({pose.sd:.1f} m)')
-        off = self._off_survey()
         if off:
             return self._judgement(pose.stamp, off)
         d2, distance, yaw_deg = fused_distance(local, pose, moved, p)
