@@ -33,7 +33,13 @@ protocol: ``benchmarks/fusion.py``'s survey_holes).
   and holes);
 - start-up: the localiser never publishes; the delay from the first scan
   to the first seed, and its error (the scans reach the witness as
-  below; before round 25 only the fused poses did).
+  below; before round 25 only the fused poses did). With the node's
+  defaults, two bounds besides (since round 33): the filter told the
+  true heading at the first scan (``set_pose`` at the scan's own answer,
+  spread as a start from a scan, the heading 10 deg; the upper bound),
+  and a seed asked to be sure in position only, with any heading the
+  filter knows (``sure_yaw_sd`` 180 deg: the localiser would have to
+  find the yaw).
 
 Each scan reaches the witness as classifier_node sends it to the monitor:
 its position, k-NN sigma, coverage probability (the APs the model lacks
@@ -107,6 +113,7 @@ SEED_GRID = {'sure_sd': (0.5, 0.75, 1.0, 1.5, 2.0),
              'sure_yaw_sd': tuple(map(math.radians, (5.0, 10.0, 15.0))),
              'sure_s': (0.0, 30.0, 60.0)}
 HOLD_GRID = {'startup_sure_s': (0.0, 15.0, 30.0)}
+TOLD_YAW_SD = math.radians(10.0)    # a heading told at start-up (rad)
 KINDS = ('displaced', 'turned', 'displaced+turned', 'frozen', 'kidnapped')
 SURVEYS = ('full', 'holes')
 TARGETS = ('0 false alarms per run; detection median <= 15 s, max <= 30 '
@@ -196,20 +203,36 @@ def survey(model):
     return model.position.map_xy(0)
 
 
-def fused_stream(model, scans, odometry, seed):
+def fused_stream(model, scans, odometry, seed, heading=None):
     """
     Return the fused stream (t, xy, yaw, cov) of a scan stream.
 
     With each scan's sigma where the filter takes it (as classifier_node
-    gives it), else positions only.
+    gives it), else positions only. ``heading`` (rad): the filter is told
+    it at the first scan with a position (:func:`told_heading`).
     """
+    def fusion():
+        f = Fusion(model.fusion, seed=seed)
+        if heading is not None:
+            told_heading(f, scans, heading)
+        return f
     try:
-        xy, yaw, cov = fuse_offline(odometry, scans,
-                                    Fusion(model.fusion, seed=seed))
+        xy, yaw, cov = fuse_offline(odometry, scans, fusion())
     except ValueError:      # (stamps, xy) only
-        xy, yaw, cov = fuse_offline(odometry, scans[:2],
-                                    Fusion(model.fusion, seed=seed))
+        xy, yaw, cov = fuse_offline(odometry, scans[:2], fusion())
     return scans[0], xy, yaw, cov
+
+
+def told_heading(fusion, scans, heading):
+    """
+    Set ``fusion`` at the first scan with a position, told ``heading``.
+
+    The scan's own answer, spread as a start from a scan (``start_sd``),
+    the heading by :data:`TOLD_YAW_SD` (the upper bound of a start-up).
+    """
+    i = int(np.flatnonzero(np.isfinite(scans[1]).all(axis=1))[0])
+    fusion.set_pose(scans[0][i], scans[1][i], heading,
+                    fusion.filter.params.start_sd, TOLD_YAW_SD, (0, 0))
 
 
 def odometry_pose(odometry, t):
@@ -240,6 +263,11 @@ class Case:
         self.survey = {k: survey(m) for k, m in models.items()}
         self.fused = {k: [fused_stream(m, self.scans[k], run.odometry, s)
                           for s in SEEDS] for k, m in models.items()}
+        first = self.scans['full'][0][np.isfinite(
+            self.scans['full'][1]).all(axis=1)][0]
+        heading = float(truth_at(self.truth, [first])[1][0])
+        self.told = [fused_stream(models['full'], self.scans['full'],
+                                  run.odometry, s, heading) for s in SEEDS]
         self.episodes = []      # (survey, kind, seed, t0, localiser,
         #                           fused, scans, truth, surveyed xy)
         self.inside = []        # (seed, t0, localiser)
@@ -404,16 +432,48 @@ def evaluate(case, params):
             j.ok is False and j.stamp >= t0 for j in judged(
                 local, case.fused[key][seed], case.scans[key],
                 case.survey[key], t0, params))
-    for f in case.fused['full']:
-        first = next((j for j in judge_offline(
-            None, f, params, scans=case.scans['full'],
-            survey=case.survey['full']) if j.seed), None)
-        s = {'delay_s': math.inf}
-        if first is not None:
-            s['delay_s'] = first.stamp - f[0][0]
-            s['m'], s['deg'] = seed_error(first, case.truth)
-        out['startup'].append(s)
+    out['startup'] = [startup(case, f, params) for f in case.fused['full']]
     return out
+
+
+def startup(case, fused, params):
+    """Return the first seed of a fused stream with no localiser pose."""
+    first = next((j for j in judge_offline(
+        None, fused, params, scans=case.scans['full'],
+        survey=case.survey['full']) if j.seed), None)
+    s = {'delay_s': math.inf}
+    if first is not None:
+        s['delay_s'] = first.stamp - fused[0][0]
+        s['m'], s['deg'] = seed_error(first, case.truth)
+    return s
+
+
+def startup_bounds(case, params):
+    """
+    Return the start-up seeds told the heading, and with any heading.
+
+    Told it (:func:`told_heading`), and a seed sure in position with any
+    heading the filter knows (``sure_yaw_sd`` 180 deg); each seed of the
+    full survey as :func:`startup` gives it.
+    """
+    return {'told_heading': [startup(case, f, params) for f in case.told],
+            'position_only': [startup(case, f, replace(
+                params, sure_yaw_sd=math.pi)) for f in case.fused['full']]}
+
+
+def bounds_line(site, bounds):
+    """Return one line of a building's :func:`startup_bounds`."""
+    parts = []
+    for key, label in (('told_heading', 'told the heading'),
+                       ('position_only', 'any known heading')):
+        starts = [s for b in bounds.values() for s in b[key]]
+        delays = [s['delay_s'] for s in starts]
+        off = sum(not (s.get('m', math.inf) <= 2 and s['deg'] <= 15)
+                  for s in starts if 'm' in s)
+        parts.append(f'{label} {min(delays):.0f}-{max(delays):.0f} s, '
+                     f'{off} of {len(starts)} off by > 2 m or 15 deg, '
+                     f'at most {max(s.get("m", 0) for s in starts):.1f} m')
+    return f'{site}: start-up seeds, defaults, ' + '; '.join(parts)
 
 
 def lost_figures(eps):
@@ -560,12 +620,16 @@ def main():
     for site, tune in ((s, [t for t in cases if t != s]) for s in cases):
         figures = {c.run.name: evaluate(c, WitnessParams())
                    for c in cases[site]}
+        bounds = {c.run.name: startup_bounds(c, WitnessParams())
+                  for c in cases[site]}
         results['buildings'][site] = {'defaults': {
             'params': vars(WitnessParams()),
-            'summary': summary(list(figures.values())), 'runs': figures}}
+            'summary': summary(list(figures.values())), 'runs': figures,
+            'startup_bounds': bounds}}
         print(f'{site}: the node\'s defaults')
         for name, f in figures.items():
             print(row(name, f), flush=True)
+        print(bounds_line(site, bounds), flush=True)
         if not tune:
             print(f'{site}: no other building to choose the thresholds on')
             continue

@@ -118,3 +118,52 @@ def test_a_wrong_start_up_seed_counts_before_a_late_one(monkeypatch):
     assert hold['startup_wrong'] == 0 and hold['startup_late'] == 6
     assert hold['startup_max_s'] == 21 + 45
     assert params.startup_sure_s == 45.0
+
+
+def test_a_heading_told_at_the_first_scan_is_the_filters_from_there():
+    # a drive north (+y, heading 90 deg) at 0.5 m/s, scans 1 m off; the
+    # first scan has no answer: told the heading, the filter knows it from
+    # the first scan with a position on; not told, it does not yet
+    witness = benchmark('witness')
+    from wifi_place_recognition.core.filter.particles import (
+        FusionParams, UNKNOWN_VARIANCE)
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 20.0)
+    xy = np.column_stack([np.zeros_like(t), 0.5 * t])
+    near = xy + rng.normal(0, 1.0, xy.shape)
+    near[0] = np.nan
+    scans = (t, near, np.full(len(t), 2.0))
+    odom_t = np.arange(0.0, 20.0, 0.1)
+    odometry = np.column_stack([odom_t, 0.5 * odom_t,
+                                np.zeros_like(odom_t), np.zeros_like(odom_t)])
+    model = SimpleNamespace(fusion=FusionParams())
+    north = math.pi / 2
+    _, _, yaw, cov = witness.fused_stream(model, scans, odometry, 0, north)
+    assert np.isnan(yaw[0])
+    assert np.all(np.abs(yaw[1:] - north) < math.radians(10))
+    assert np.all(cov[1:, 2, 2] < UNKNOWN_VARIANCE)
+    _, _, _, cov = witness.fused_stream(model, scans, odometry, 0)
+    assert cov[1, 2, 2] == UNKNOWN_VARIANCE
+
+
+def test_start_up_bounds_ask_the_told_stream_and_the_position_alone():
+    # the fused pose sure in position from the start, its yaw 30 deg wide:
+    # the defaults never seed it; sure in position only, it seeds after the
+    # start-up hold (15 s); the stream told the heading (yaw 3 deg) seeds
+    # after the hold too
+    witness = benchmark('witness')
+    from wifi_place_recognition.core.witness_params import WitnessParams
+    c = case(0)
+    t, xy = c.local[0], c.truth[:, 1:3]
+    wide = stream(t, xy, 0.5, math.radians(30))
+    c.fused['full'] = [wide] * 3
+    c.told = [stream(t, xy, 0.5, math.radians(3))] * 3
+    assert witness.evaluate(c, WitnessParams())['startup'] == \
+        [{'delay_s': math.inf}] * 3
+    bounds = witness.startup_bounds(c, WitnessParams())
+    for key in ('told_heading', 'position_only'):
+        assert [s['delay_s'] for s in bounds[key]] == [15.0] * 3
+        assert all(s['m'] == 0 and s['deg'] == 0 for s in bounds[key])
+    line = witness.bounds_line('b0', {'r': bounds})
+    assert line.startswith('b0: start-up seeds, defaults, told the heading '
+                           '15-15 s, 0 of 3 off')
