@@ -282,7 +282,7 @@ def pair(model, survey_csv, test, kept, calibrated):
                      for a, c in zip(xy, proba.argmax(axis=1))])
     error = np.linalg.norm(xy - test.xy, axis=1)
     ok = np.isfinite(error)
-    hole = fb.in_holes(test, kept)
+    hole = fb.in_holes(test.xy, kept)
     x, covered, c_error, c_knn, c_side = cut_examples(model, survey_csv)
     mean, scale = x.mean(axis=0), np.maximum(x.std(axis=0), 1e-9)
     fit = LogisticRegression().fit((x - mean) / scale, covered)

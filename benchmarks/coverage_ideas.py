@@ -369,7 +369,7 @@ def pair(trained, test, seeds):
     """Return the figures of one test run with one training run's models."""
     plain, fitted = (load_model(p) for p in trained[:2])
     proba, *single = scan_answers(plain, test.fp)   # single: as fb's
-    hole = fb.in_holes(test, trained[2])
+    hole = fb.in_holes(test.xy, trained[2])
     survey_xy = survey_positions(plain)
     side = one_sidedness(single[0], survey_xy)
     ok = np.isfinite(single[0]).all(axis=1) & np.isfinite(test.xy).all(

@@ -30,7 +30,9 @@ with every heading. Also: a
 kidnapped robot (two runs spliced, the odometry continuous, the true
 position jumping; each scan's answer whole, its mismatch included, as
 the node's filter takes it) and the recovery time (the error below 2 m
-for 10 s in a row), per survey; on every run, how near the filter came
+for 10 s in a row), per survey, with its upper bound (told the holes, as
+above; since round 33) and how many of the first 60 s of scans after
+the splice lie in holes; on every run, how near the filter came
 to a restart (the most of ``reset_window`` scans that disagreed); each
 run's drift over stretches of 20 m from its truth
 (:func:`drift_steadiness`). And leaving
@@ -293,10 +295,10 @@ def localise(params, odometry, stamps, single, seed, start=None):
             fusion.filter.most_disagreeing)
 
 
-def in_holes(test, kept):
-    """Return which test scans lie farther than COVERED_M from ``kept``."""
-    return np.isfinite(test.xy).all(axis=1) & \
-        ~(distance_to_survey(test.xy, kept) <= COVERED_M)
+def in_holes(xy, kept):
+    """Return which true positions lie farther than COVERED_M from ``kept``."""
+    return np.isfinite(xy).all(axis=1) & \
+        ~(distance_to_survey(xy, kept) <= COVERED_M)
 
 
 def single_figures(test, single, hole):
@@ -341,7 +343,7 @@ def pair(trained, test):
     """Return the figures of one test run with one training run's models."""
     plain, fitted = (load_model(p) for p in trained[:2])
     single = single_scans(plain, test)
-    hole = in_holes(test, trained[2])
+    hole = in_holes(test.xy, trained[2])
     odo_xy, odo_yaw = odometry_alone(test.odometry, test.stamps, test.xy,
                                      test.yaw)
     ok = np.isfinite(test.xy).all(axis=1)
@@ -455,22 +457,55 @@ def spliced(a, b, single_a, single_b):
             cut_a + 1.0)
 
 
-def kidnap(params, a, b, single_a, single_b, seeds=SEEDS):
-    """Return the recovery figures of ``a`` spliced onto ``b``, per seed."""
+def kidnap(params, a, b, single_a, single_b, kept=None, seeds=SEEDS):
+    """
+    Return the recovery figures of ``a`` spliced onto ``b``, per seed.
+
+    Given ``kept`` (the survey's true positions), also how many of the
+    first 60 s of scans after the splice lie in holes (more than
+    COVERED_M from it), and the upper bound: the filter told which scans
+    do, as :func:`pair` tells it.
+    """
     stamps, true_xy, true_yaw, single, odometry, cut = spliced(
         a, b, single_a, single_b)
     at = np.searchsorted(stamps, cut)
     jump = float(np.linalg.norm(true_xy[at] - true_xy[at - 1]))
+    after = stamps >= cut
+    hole = None if kept is None else in_holes(true_xy, kept)
     out = []
     for seed in seeds:
-        fused = localise(params, odometry, stamps, single, seed)[0]
-        error = np.linalg.norm(fused - true_xy, axis=1)
-        after = stamps >= cut
+        error = fused_error(params, odometry, stamps, single, seed, true_xy)
         out.append({'jump_m': jump, 'recovered_below_2m_after_s':
                     recovery(stamps[after] - cut, error[after]),
                     'mean_after_60s_m': float(np.nanmean(
                         error[after & (stamps >= cut + 60)]))})
+        if hole is None:
+            continue
+        told = fused_error(replace(params, coverage_full=0.5), odometry,
+                           stamps, (*single[:2], np.where(hole, 0.0, 1.0)),
+                           seed, true_xy)
+        out[-1].update({'told_holes_recovered_below_2m_after_s': recovery(
+            stamps[after] - cut, told[after]), 'scans_in_holes_first_60s':
+            int((hole & after & (stamps < cut + 60)).sum())})
     return out
+
+
+def fused_error(params, odometry, stamps, single, seed, true_xy):
+    """Return the fused pose's error (m) at every scan (:func:`localise`)."""
+    xy = localise(params, odometry, stamps, single, seed)[0]
+    return np.linalg.norm(xy - true_xy, axis=1)
+
+
+def kidnap_line(name, result):
+    """Return one line of a splice's :func:`kidnap` figures."""
+    told = ', '.join(f'{r["told_holes_recovered_below_2m_after_s"]:.0f}'
+                     for r in result)
+    return (f'kidnap {name}: jump {result[0]["jump_m"]:.1f} m, below 2 m '
+            'after ' + ', '.join(f'{r["recovered_below_2m_after_s"]:.0f}'
+                                 for r in result) +
+            f' s (told the holes: {told} s; '
+            f'{result[0]["scans_in_holes_first_60s"]} scans in holes in the '
+            'first 60 s)')
 
 
 def drift_steadiness(run):
@@ -698,7 +733,7 @@ def select(data, out):
                                      trained[train.name][:2])
                     cases.append((site, test, fitted.fusion,
                                   single_scans(plain, test),
-                                  in_holes(test, trained[train.name][2])))
+                                  in_holes(test.xy, trained[train.name][2])))
                 for a, b in permutations(runs, 2):
                     train = ([r for r in runs if r not in (a, b)] or [a])[0]
                     plain, fitted = (load_model(m) for m in
@@ -804,16 +839,16 @@ def main():
                                      trained[train.name][:2])
                     result = kidnap(fitted.fusion, a, b,
                                     single_scans(plain, a),
-                                    single_scans(plain, b))
+                                    single_scans(plain, b),
+                                    trained[train.name][2])
                     results['kidnap'][f'{a.name} then {b.name} (model '
                                       f'{train.name}'
                                       f'{", holes" if holes else ""})'] = \
                         result
-                    print(f'kidnap {a.name} -> {b.name} (model {train.name}'
-                          f'{", holes" if holes else ""}): jump '
-                          f'{result[0]["jump_m"]:.1f} m, below 2 m after '
-                          + ', '.join(f'{r["recovered_below_2m_after_s"]:.0f}'
-                                      for r in result) + ' s', flush=True)
+                    print(kidnap_line(f'{a.name} -> {b.name} (model '
+                                      f'{train.name}'
+                                      f'{", holes" if holes else ""})',
+                                      result), flush=True)
     print('every pair, survey and seed, fitted: ' + exits_line(
         [r for key in ('pairs', 'holes') for f in results[key].values()
          for r in f['fused_fitted']]))

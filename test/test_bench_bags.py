@@ -36,7 +36,7 @@ def test_a_folder_of_bags_gives_the_csvs_figures(fusion, tmp_path):
         plain, fitted, kept, _ = fusion.models(train, folder, holes=True)
         model = fusion.load_model(fitted)
         single = fusion.single_scans(fusion.load_model(plain), test)
-        hole = fusion.in_holes(test, kept)
+        hole = fusion.in_holes(test.xy, kept)
         fused = fusion.fused_figures(test, single, model.fusion, hole,
                                      seeds=(0,))[0][0]
         figures.append((model.fusion.drift_mean,

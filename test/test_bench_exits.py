@@ -46,3 +46,41 @@ def test_a_runs_drift_is_measured_stretch_by_stretch(fusion):
     run.stamps, run.xy, run.yaw = run.stamps[:80], run.xy[:80], run.yaw[:80]
     assert 'fitting needs 3 stretches of 20 m' in fusion.drift_steadiness(
         run)['error']
+
+
+def test_a_kidnap_is_scored_with_its_holes_and_told_them(fusion):
+    # two runs 20 m apart along x at 0.5 m/s, spliced half way; the
+    # survey lacks b's stretch from x 50 to 67 m (the scans there more
+    # than 3 m from it): 34 of the first 60 s after the splice in a hole
+    from wifi_place_recognition.core.filter.particles import FusionParams
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 200.0)
+    odom_t = np.arange(0.0, 200.0, 0.1)
+    odometry = np.column_stack([odom_t, 0.5 * odom_t, 0 * odom_t,
+                                0 * odom_t])
+
+    def run(y):
+        xy = np.column_stack([0.5 * t, np.full(len(t), y)])
+        return SimpleNamespace(stamps=t, xy=xy, yaw=0 * t,
+                               odometry=odometry), (
+            xy + rng.normal(0, 1.0, xy.shape), np.full(len(t), 2.0),
+            np.full(len(t), np.nan), np.full(len(t), np.nan))
+    (a, single_a), (b, single_b) = run(0.0), run(20.0)
+    kept = np.concatenate([a.xy, b.xy[t >= 140]])
+    plain = fusion.kidnap(FusionParams(), a, b, single_a, single_b,
+                          seeds=(0,))
+    told = fusion.kidnap(FusionParams(), a, b, single_a, single_b, kept,
+                         seeds=(0,))
+    assert set(plain[0]) == {'jump_m', 'recovered_below_2m_after_s',
+                             'mean_after_60s_m'}
+    assert told[0]['jump_m'] == plain[0]['jump_m'] == math.hypot(0.5, 20)
+    assert told[0]['scans_in_holes_first_60s'] == 34
+    assert told[0]['recovered_below_2m_after_s'] == \
+        plain[0]['recovered_below_2m_after_s']
+    # the scans here are right in the hole too; told it, the filter skips
+    # them and finds the robot only on covered ground, 34 s on
+    assert plain[0]['recovered_below_2m_after_s'] < 34 <= \
+        told[0]['told_holes_recovered_below_2m_after_s'] < 60
+    line = fusion.kidnap_line('a -> b', told)
+    assert line.startswith('kidnap a -> b: jump 20.0 m, below 2 m after ')
+    assert '34 scans in holes in the first 60 s' in line
