@@ -30,9 +30,10 @@ with every heading. Also: a
 kidnapped robot (two runs spliced, the odometry continuous, the true
 position jumping; each scan's answer whole, its mismatch included, as
 the node's filter takes it) and the recovery time (the error below 2 m
-for 10 s in a row), per survey, with its upper bound (told the holes, as
-above; since round 33) and how many of the first 60 s of scans after
-the splice lie in holes; on every run, how near the filter came
+for 10 s in a row), per survey, and since round 33 how many of the
+first 60 s of scans after the splice lie in holes and the filter told
+the holes there, as above (without the scans' mismatch: a bound where
+they are many, slower on splices that need the mismatch); on every run, how near the filter came
 to a restart (the most of ``reset_window`` scans that disagreed); each
 run's drift over stretches of 20 m from its truth
 (:func:`drift_steadiness`). And leaving
@@ -463,8 +464,8 @@ def kidnap(params, a, b, single_a, single_b, kept=None, seeds=SEEDS):
 
     Given ``kept`` (the survey's true positions), also how many of the
     first 60 s of scans after the splice lie in holes (more than
-    COVERED_M from it), and the upper bound: the filter told which scans
-    do, as :func:`pair` tells it.
+    COVERED_M from it), and the filter told which scans do, as
+    :func:`pair` tells it (its mismatch not given).
     """
     stamps, true_xy, true_yaw, single, odometry, cut = spliced(
         a, b, single_a, single_b)
@@ -497,7 +498,7 @@ def fused_error(params, odometry, stamps, single, seed, true_xy):
 
 
 def kidnap_line(name, result):
-    """Return one line of a splice's :func:`kidnap` figures."""
+    """Return one line of a splice's :func:`kidnap` figures (given ``kept``)."""
     told = ', '.join(f'{r["told_holes_recovered_below_2m_after_s"]:.0f}'
                      for r in result)
     return (f'kidnap {name}: jump {result[0]["jump_m"]:.1f} m, below 2 m '

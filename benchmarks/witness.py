@@ -209,28 +209,34 @@ def fused_stream(model, scans, odometry, seed, heading=None):
 
     With each scan's sigma where the filter takes it (as classifier_node
     gives it), else positions only. ``heading`` (rad): the filter is told
-    it at the first scan with a position (:func:`told_heading`).
+    it at the first scan with a position (:func:`tell_heading`).
     """
     def fusion():
         f = Fusion(model.fusion, seed=seed)
         if heading is not None:
-            told_heading(f, scans, heading)
+            tell_heading(f, scans, heading)
         return f
+    first = fusion()    # a bad heading stops here, not in the retry below
     try:
-        xy, yaw, cov = fuse_offline(odometry, scans, fusion())
+        xy, yaw, cov = fuse_offline(odometry, scans, first)
     except ValueError:      # (stamps, xy) only
         xy, yaw, cov = fuse_offline(odometry, scans[:2], fusion())
     return scans[0], xy, yaw, cov
 
 
-def told_heading(fusion, scans, heading):
+def first_answered(scans):
+    """Return the index of the first scan with a position."""
+    return int(np.flatnonzero(np.isfinite(scans[1]).all(axis=1))[0])
+
+
+def tell_heading(fusion, scans, heading):
     """
     Set ``fusion`` at the first scan with a position, told ``heading``.
 
     The scan's own answer, spread as a start from a scan (``start_sd``),
     the heading by :data:`TOLD_YAW_SD` (the upper bound of a start-up).
     """
-    i = int(np.flatnonzero(np.isfinite(scans[1]).all(axis=1))[0])
+    i = first_answered(scans)
     fusion.set_pose(scans[0][i], scans[1][i], heading,
                     fusion.filter.params.start_sd, TOLD_YAW_SD, (0, 0))
 
@@ -263,8 +269,7 @@ class Case:
         self.survey = {k: survey(m) for k, m in models.items()}
         self.fused = {k: [fused_stream(m, self.scans[k], run.odometry, s)
                           for s in SEEDS] for k, m in models.items()}
-        first = self.scans['full'][0][np.isfinite(
-            self.scans['full'][1]).all(axis=1)][0]
+        first = self.scans['full'][0][first_answered(self.scans['full'])]
         heading = float(truth_at(self.truth, [first])[1][0])
         self.told = [fused_stream(models['full'], self.scans['full'],
                                   run.odometry, s, heading) for s in SEEDS]
@@ -452,7 +457,7 @@ def startup_bounds(case, params):
     """
     Return the start-up seeds told the heading, and with any heading.
 
-    Told it (:func:`told_heading`), and a seed sure in position with any
+    Told it (:func:`tell_heading`), and a seed sure in position with any
     heading the filter knows (``sure_yaw_sd`` 180 deg); each seed of the
     full survey as :func:`startup` gives it.
     """
@@ -467,12 +472,17 @@ def bounds_line(site, bounds):
     for key, label in (('told_heading', 'told the heading'),
                        ('position_only', 'any known heading')):
         starts = [s for b in bounds.values() for s in b[key]]
-        delays = [s['delay_s'] for s in starts]
-        off = sum(not (s.get('m', math.inf) <= 2 and s['deg'] <= 15)
-                  for s in starts if 'm' in s)
-        parts.append(f'{label} {min(delays):.0f}-{max(delays):.0f} s, '
-                     f'{off} of {len(starts)} off by > 2 m or 15 deg, '
-                     f'at most {max(s.get("m", 0) for s in starts):.1f} m')
+        seeded = [s for s in starts if 'm' in s]
+        part = f'{label}: {len(starts) - len(seeded)} without a seed'
+        if seeded:
+            delays = [s['delay_s'] for s in seeded]
+            off = sum(not (s['m'] <= 2 and s['deg'] <= 15) for s in seeded)
+            part = (f'{label} {min(delays):.0f}-{max(delays):.0f} s, {off} '
+                    f'of {len(seeded)} off by > 2 m or 15 deg, at most '
+                    f'{max(s["m"] for s in seeded):.1f} m') + \
+                (f', {len(starts) - len(seeded)} without a seed'
+                 if len(seeded) < len(starts) else '')
+        parts.append(part)
     return f'{site}: start-up seeds, defaults, ' + '; '.join(parts)
 
 

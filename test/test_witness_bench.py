@@ -147,23 +147,27 @@ def test_a_heading_told_at_the_first_scan_is_the_filters_from_there():
 
 
 def test_start_up_bounds_ask_the_told_stream_and_the_position_alone():
-    # the fused pose sure in position from the start, its yaw 30 deg wide:
-    # the defaults never seed it; sure in position only, it seeds after the
-    # start-up hold (15 s); the stream told the heading (yaw 3 deg) seeds
-    # after the hold too
+    # the fused pose sure in position (1 m aside), its yaw 30 deg wide:
+    # the defaults never seed it; sure in position with any known heading,
+    # it seeds after the start-up hold (15 s), 1 m off; the stream told
+    # the heading (on the truth, yaw 3 deg) seeds after the hold too, 0 m
+    # off; a run that never seeds is counted as such
     witness = benchmark('witness')
     from wifi_place_recognition.core.witness_params import WitnessParams
     c = case(0)
     t, xy = c.local[0], c.truth[:, 1:3]
-    wide = stream(t, xy, 0.5, math.radians(30))
+    wide = stream(t, xy + [0.0, 1.0], 0.5, math.radians(30))
     c.fused['full'] = [wide] * 3
     c.told = [stream(t, xy, 0.5, math.radians(3))] * 3
     assert witness.evaluate(c, WitnessParams())['startup'] == \
         [{'delay_s': math.inf}] * 3
     bounds = witness.startup_bounds(c, WitnessParams())
-    for key in ('told_heading', 'position_only'):
+    for key, off in (('told_heading', 0.0), ('position_only', 1.0)):
         assert [s['delay_s'] for s in bounds[key]] == [15.0] * 3
-        assert all(s['m'] == 0 and s['deg'] == 0 for s in bounds[key])
-    line = witness.bounds_line('b0', {'r': bounds})
-    assert line.startswith('b0: start-up seeds, defaults, told the heading '
-                           '15-15 s, 0 of 3 off')
+        assert all(s['m'] == off and s['deg'] == 0 for s in bounds[key])
+    assert witness.bounds_line('b0', {'r': bounds}) == (
+        'b0: start-up seeds, defaults, told the heading 15-15 s, 0 of 3 off '
+        'by > 2 m or 15 deg, at most 0.0 m; any known heading 15-15 s, 0 of '
+        '3 off by > 2 m or 15 deg, at most 1.0 m')
+    bounds['told_heading'][0] = {'delay_s': math.inf}
+    assert ', 1 without a seed;' in witness.bounds_line('b0', {'r': bounds})
