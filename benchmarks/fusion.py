@@ -30,12 +30,12 @@ with every heading. Also: a
 kidnapped robot (two runs spliced, the odometry continuous, the true
 position jumping; each scan's answer whole, its mismatch included, as
 the node's filter takes it) and the recovery time (the error below 2 m
-for 10 s in a row), per survey, and since round 33 how many of the
-first 60 s of scans after the splice lie in holes and the filter told
-the holes there, as above (without the scans' mismatch: a bound where
-they are many, slower on splices that need the mismatch); on every run, how near the filter came
-to a restart (the most of ``reset_window`` scans that disagreed); each
-run's drift over stretches of 20 m from its truth
+for 10 s in a row), per survey; since round 33 also how many of the
+first 60 s of scans after the splice lie in holes, and the filter told
+the holes as above (without the scans' mismatch: a bound where many
+do, slower where a splice needs the mismatch); on every run, how near
+the filter came to a restart (the most of ``reset_window`` scans that
+disagreed); each run's drift over stretches of 20 m from its truth
 (:func:`drift_steadiness`). And leaving
 a hole (:func:`hole_exits`): where the robot comes back to covered
 ground for at least 30 s after at least 10 scans in a hole, how far off
