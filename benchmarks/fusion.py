@@ -355,7 +355,7 @@ def pair(trained, test):
            'odometry': score(test.stamps, test.xy, odo_xy, test.yaw,
                              odo_yaw),
            'drift_fitted_deg_per_m': math.degrees(fitted.fusion.drift_mean)}
-    told = (single[0], single[1], np.where(hole, 0.0, 1.0))
+    told = told_holes(fitted.fusion, single, hole)
     for name, params, given, start in (
             ('fused_fitted', fitted.fusion, single, False),
             ('fused_default', FusionParams(), single, False),
@@ -365,8 +365,7 @@ def pair(trained, test):
              single, False),
             ('fused_coverage', replace(fitted.fusion, coverage_full=0.5),
              single, False),
-            ('fused_told_holes', replace(fitted.fusion, coverage_full=0.5),
-             told, False),
+            ('fused_told_holes', *told, False),
             ('fused_set_start', fitted.fusion, single, True)):
         out[name], xy = fused_figures(test, given, params, hole,
                                       start=start)
@@ -472,7 +471,11 @@ def kidnap(params, a, b, single_a, single_b, kept=None, seeds=SEEDS):
     at = np.searchsorted(stamps, cut)
     jump = float(np.linalg.norm(true_xy[at] - true_xy[at - 1]))
     after = stamps >= cut
-    hole = None if kept is None else in_holes(true_xy, kept)
+    told = None
+    if kept is not None:
+        hole = in_holes(true_xy, kept)
+        told = told_holes(params, single, hole)
+        in_first_minute = int((hole & after & (stamps < cut + 60)).sum())
     out = []
     for seed in seeds:
         error = fused_error(params, odometry, stamps, single, seed, true_xy)
@@ -480,15 +483,25 @@ def kidnap(params, a, b, single_a, single_b, kept=None, seeds=SEEDS):
                     recovery(stamps[after] - cut, error[after]),
                     'mean_after_60s_m': float(np.nanmean(
                         error[after & (stamps >= cut + 60)]))})
-        if hole is None:
-            continue
-        told = fused_error(replace(params, coverage_full=0.5), odometry,
-                           stamps, (*single[:2], np.where(hole, 0.0, 1.0)),
-                           seed, true_xy)
-        out[-1].update({'told_holes_recovered_below_2m_after_s': recovery(
-            stamps[after] - cut, told[after]), 'scans_in_holes_first_60s':
-            int((hole & after & (stamps < cut + 60)).sum())})
+        if told is not None:
+            error = fused_error(told[0], odometry, stamps, told[1], seed,
+                                true_xy)
+            out[-1].update({'told_holes_recovered_below_2m_after_s':
+                            recovery(stamps[after] - cut, error[after]),
+                            'scans_in_holes_first_60s': in_first_minute})
     return out
+
+
+def told_holes(params, single, hole):
+    """
+    Return (params, scans) of the filter told which scans lie in holes.
+
+    The upper bound of weighing scans by coverage: coverage 0 in ``hole``,
+    1 elsewhere, weighed from ``coverage_full`` 0.5; the scans' positions
+    and sigmas only (their mismatch not given).
+    """
+    return (replace(params, coverage_full=0.5),
+            (single[0], single[1], np.where(hole, 0.0, 1.0)))
 
 
 def fused_error(params, odometry, stamps, single, seed, true_xy):
