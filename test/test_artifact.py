@@ -56,6 +56,11 @@ def test_shipped_model_loads_with_its_provenance():
     assert len(model.members) == TrainConfig().ensemble
     assert model.position.columns == ('LONGITUDE', 'LATITUDE')
     assert 4864000 < model.position.origin[1] < 4866000   # UTM, float64
+    # what the documented command learns today beside the networks: the
+    # edge widening, the coverage section, the survey's usual mismatch
+    assert model.position.edge_sigma == 15.0 and model.coverage is not None
+    assert model.position.usual_mismatch == pytest.approx(4.93, abs=0.01)
+    assert 'usual_mismatch_note' in prov
 
 
 def _header_and_arrays(path):
