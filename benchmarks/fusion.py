@@ -489,12 +489,13 @@ def kidnap(params, a, b, single_a, single_b, kept=None, seeds=SEEDS):
                     recovery(stamps[after] - cut, error[after]),
                     'mean_after_60s_m': float(np.nanmean(
                         error[after & (stamps >= cut + 60)]))})
+        if told is not None:
+            out[-1]['scans_in_holes_first_60s'] = in_first_minute
         for key, (given, scans) in (told or {}).items():
             error = fused_error(given, odometry, stamps, scans, seed,
                                 true_xy)
-            out[-1].update({f'{key}_recovered_below_2m_after_s':
-                            recovery(stamps[after] - cut, error[after]),
-                            'scans_in_holes_first_60s': in_first_minute})
+            out[-1][f'{key}_recovered_below_2m_after_s'] = recovery(
+                stamps[after] - cut, error[after])
     return out
 
 
@@ -510,7 +511,7 @@ def told_holes(params, single, hole, heard=False):
     """
     scans = (single[0], single[1], np.where(hole, 0.0, 1.0))
     return (replace(params, coverage_full=0.5),
-            scans + (single[3],) if heard else scans)
+            (scans + (single[3],)) if heard else scans)
 
 
 def fused_error(params, odometry, stamps, single, seed, true_xy):
