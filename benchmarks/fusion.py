@@ -607,8 +607,8 @@ def coverage_line(name, survey, figures):
             f'{mean(figures["fused_coverage"]):.2f}, told the holes '
             f'{mean(figures["fused_told_holes"]):.2f}, with the mismatch '
             f'{mean(figures["fused_told_holes_heard"]):.2f} | start set: '
-            f'ratio '
-            f'{mean(start):.2f}, p95 {max(r["p95_m"] for r in start):.2f}, '
+            f'ratio {mean(start):.2f}, '
+            f'p95 {max(r["p95_m"] for r in start):.2f}, '
             f'max60 {max(r["max_after_settle_m"] for r in start):.2f}')
 
 

@@ -473,16 +473,16 @@ def bounds_line(site, bounds):
                        ('position_only', 'any known heading')):
         starts = [s for b in bounds.values() for s in b[key]]
         seeded = [s for s in starts if 'm' in s]
-        part = f'{label}: {len(starts) - len(seeded)} without a seed'
-        if seeded:
-            delays = [s['delay_s'] for s in seeded]
-            off = sum(not (s['m'] <= 2 and s['deg'] <= 15) for s in seeded)
-            part = (f'{label} {min(delays):.0f}-{max(delays):.0f} s, {off} '
-                    f'of {len(seeded)} off by > 2 m or 15 deg, at most '
-                    f'{max(s["m"] for s in seeded):.1f} m') + \
-                (f', {len(starts) - len(seeded)} without a seed'
-                 if len(seeded) < len(starts) else '')
-        parts.append(part)
+        missing = f'{len(starts) - len(seeded)} without a seed'
+        if not seeded:
+            parts.append(f'{label}: {missing}')
+            continue
+        delays = [s['delay_s'] for s in seeded]
+        off = sum(not (s['m'] <= 2 and s['deg'] <= 15) for s in seeded)
+        parts.append(f'{label} {min(delays):.0f}-{max(delays):.0f} s, {off} '
+                     f'of {len(seeded)} off by > 2 m or 15 deg, at most '
+                     f'{max(s["m"] for s in seeded):.1f} m' +
+                     (f', {missing}' if len(seeded) < len(starts) else ''))
     return f'{site}: start-up seeds, defaults, ' + '; '.join(parts)
 
 
