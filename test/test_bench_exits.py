@@ -1,4 +1,4 @@
-"""The fusion benchmark's pieces: hole exits timed, a run's drift measured."""
+"""The fusion benchmark's pieces: hole exits, drift, kidnaps, what limits a pair."""
 
 import math
 from types import SimpleNamespace
@@ -72,7 +72,11 @@ def test_a_kidnap_is_scored_with_its_holes_and_told_them(fusion):
     told = fusion.kidnap(FusionParams(), a, b, single_a, single_b, kept,
                          seeds=(0,))
     assert set(plain[0]) == {'jump_m', 'recovered_below_2m_after_s',
-                             'mean_after_60s_m'}
+                             'mean_after_60s_m',
+                             'run_alike_recovered_below_2m_after_s'}
+    # the scans' mismatch not known: no run of unlike scans to widen
+    assert plain[0]['run_alike_recovered_below_2m_after_s'] == \
+        plain[0]['recovered_below_2m_after_s']
     assert told[0]['jump_m'] == plain[0]['jump_m'] == math.hypot(0.5, 20)
     assert told[0]['scans_in_holes_first_60s'] == 34
     assert told[0]['recovered_below_2m_after_s'] == \
@@ -98,6 +102,7 @@ def test_a_kidnap_is_scored_with_its_holes_and_told_them(fusion):
     line = fusion.kidnap_line('a -> b', told)
     assert line.startswith('kidnap a -> b: jump 20.0 m, below 2 m after ')
     assert '34 scans in holes in the first 60 s' in line
+    assert 'each alike: ' in line
 
 
 def test_the_holes_told_with_the_mismatch_keep_it(fusion):
@@ -126,3 +131,43 @@ def test_the_holes_told_with_the_mismatch_keep_it(fusion):
                                             truth)[aside])
                for given, scans in (told, heard)]
     assert dragged[1] < dragged[0] - 1.0, dragged
+
+
+def _run(**change):
+    """Return one seed's figures, every goal met but what ``change`` sets."""
+    return {'ratio': 0.3, 'p95_m': 1.0, 'max_after_settle_m': 1.5,
+            'yaw_median_deg_after_settle': 2.0, 'in_95_ellipse': 0.95,
+            'hole_exits': [], **change}
+
+
+def _exit(seconds):
+    return [{'at_s': 45.0, 'error_m': 3.5, 'below_1m_after_s': seconds}]
+
+
+def test_what_limits_a_pair_is_told_goal_by_goal(fusion):
+    good = [_run(), _run(), _run()]
+    figures = {'fused_fitted': good, 'fused_set_start': good,
+               'fused_told_holes_heard': good}
+    assert fusion.limits(figures) == {}
+    assert 'every goal met' in fusion.limits_line('a <- b', 'full', {})
+    # the default: a seed whose start settles wrong, an ellipse too
+    # narrow, a pose 3.5 m off leaving a hole back below 1 m after 36 s
+    figures['fused_fitted'] = [_run(ratio=0.56, p95_m=3.9),
+                               _run(in_95_ellipse=0.85),
+                               _run(hole_exits=_exit(36.0))]
+    figures['fused_set_start'] = [_run(), _run(in_95_ellipse=0.985),
+                                  _run(hole_exits=_exit(36.0))]
+    figures['fused_told_holes_heard'] = [_run(ratio=0.56, p95_m=2.0),
+                                         _run(), _run(hole_exits=_exit(25.0))]
+    limited = fusion.limits(figures)
+    assert limited == {'ratio': ['told the start'],
+                       'p95': ['told the start', 'told the holes'],
+                       'ellipse': ['told the holes'],
+                       'exits': ['told the holes']}
+    # neither bound alone; a figure that is not known misses
+    figures['fused_set_start'][0]['ratio'] = 0.7
+    figures['fused_fitted'][2]['yaw_median_deg_after_settle'] = math.nan
+    limited = fusion.limits(figures)
+    assert limited['ratio'] == [] and 'yaw' in limited
+    assert 'ratio (neither alone); p95 (told the start or told the holes)' \
+        in fusion.limits_line('a <- b', 'full', limited)

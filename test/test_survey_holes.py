@@ -7,12 +7,14 @@ on: :class:`TrackMisfit` sees it, the sensor model trusts those scans
 less, and the pose follows odometry; a kidnapped robot still restarts.
 """
 
+from dataclasses import replace
 import math
 
 import numpy as np
 import pytest
 from wifi_place_recognition.core.filter.fusion import Fusion
-from wifi_place_recognition.core.filter.mismatch import RecentMismatch
+from wifi_place_recognition.core.filter.mismatch import (RecentMismatch,
+                                                         UnlikeRun)
 from wifi_place_recognition.core.filter.particles import (DISAGREED,
                                                           FusionParams,
                                                           ParticleFilter)
@@ -164,7 +166,8 @@ def test_scans_that_sound_unlike_the_survey_do_not_drag_the_pose():
     # they sound unlike the references they are placed at (twice the
     # survey's usual mismatch; 1 elsewhere). Widened, they hold the
     # particles together and drag them less (not nothing: 60 scans all 6
-    # m aside, the worst a hole can be).
+    # m aside, the worst a hole can be); widened the more the longer the
+    # run (the filter settled when it began), far less.
     odometry, stamps, truth = drive()
     scans = noisy(truth)
     inside = (stamps >= 100) & (stamps < 160)
@@ -177,19 +180,28 @@ def test_scans_that_sound_unlike_the_survey_do_not_drag_the_pose():
         fusion = Fusion(params, seed=seed)
         xy = fuse_offline(odometry, answers, fusion)[0]
         return np.linalg.norm(xy - truth, axis=1), fusion.counts
-    widened = [errors(FusionParams(), s) for s in SEEDS]
-    believed = [errors(FusionParams(mismatch_scans=0), s) for s in SEEDS]
-    worst = np.array([e[inside].max() for e, _ in widened])
-    dragged = np.array([e[inside].max() for e, _ in believed])
+    fitted = FusionParams(drift_sd=0.005)   # the drift known (exact here)
+    widened = [errors(fitted, s) for s in SEEDS]
+    each = [errors(replace(fitted, mismatch_run_power=0), s) for s in SEEDS]
+    believed = [errors(replace(fitted, mismatch_scans=0), s) for s in SEEDS]
+    worst, alike, dragged = (np.array([e[inside].max() for e, _ in runs])
+                             for runs in (widened, each, believed))
     assert np.median(dragged) > 6.0, dragged
-    assert np.median(worst) < 0.8 * np.median(dragged), (worst, dragged)
-    assert (worst < dragged).sum() >= 9, (worst, dragged)
+    assert np.median(alike) < 0.8 * np.median(dragged), (alike, dragged)
+    assert (alike < dragged).sum() >= 9, (alike, dragged)
+    assert np.median(worst) < 0.6 * np.median(alike), (worst, alike)
+    assert (worst < alike).sum() >= 9, (worst, alike)
     # counted in the health; back on covered ground, the last 5 scans'
     # mean decides: as the filter that believed them, or sooner
     assert all(c['scans_unlike_survey'] == pytest.approx(inside.sum(), abs=3)
                for _, c in widened)
     after = (stamps >= 180) & (stamps < 200)
-    assert np.median([e[after].max() for e, _ in widened]) < 2.0
+    assert np.median([e[after].max() for e, _ in each]) < 2.0
+    assert np.median([e[after].max() for e, _ in widened]) < 1.0
+    # the drift not fitted: the run is not counted, each scan alike
+    np.testing.assert_array_equal(
+        errors(FusionParams(), 0)[0],
+        errors(FusionParams(mismatch_run_power=0), 0)[0])
 
 
 def test_a_scan_is_as_wide_as_it_sounds_like_the_survey():
@@ -213,11 +225,39 @@ def test_a_scan_is_as_wide_as_it_sounds_like_the_survey():
     assert sensor.width(WifiPosition(xy, misfit=15.0, mismatch=1.4)) == 30.0
     off = WifiSensorModel(FusionParams(mismatch_scans=0))
     assert off.width(WifiPosition(xy, mismatch=3.0)) == 4.0
+    # the 9th scan of a run: beyond wifi_sd 3 times as wide; a scan that
+    # sounds like the survey is not widened however long the run
+    assert sensor.width(WifiPosition(xy, mismatch=1.6, unlike_run=9)) == \
+        pytest.approx(4.0 + 3 * 16.0)
+    assert sensor.width(WifiPosition(xy, mismatch=1.4, unlike_run=9)) == \
+        pytest.approx(4.0 + 3 * 8.0)
+    assert sensor.width(WifiPosition(xy, mismatch=1.0, unlike_run=9)) == 4.0
+    alike = WifiSensorModel(FusionParams(mismatch_run_power=0))
+    assert alike.width(WifiPosition(xy, mismatch=3.0, unlike_run=9)) == 16.0
+    with pytest.raises(ValueError, match='mismatch_run_power = 1.5'):
+        FusionParams(mismatch_run_power=1.5)
     for full, none in ((1.6, 1.2), (1.2, 1.2), (0.0, 1.0)):
         with pytest.raises(ValueError, match=f'mismatch_full = {full!r}'):
             FusionParams(mismatch_full=full, mismatch_none=none)
     with pytest.raises(ValueError, match='mismatch_width = 0'):
         FusionParams(mismatch_width=0)
+
+
+def test_a_run_of_unlike_scans_counts_once_the_filter_settled():
+    run = UnlikeRun()
+    fitted = FusionParams(drift_sd=0.005).drift_known    # fit_odometry's
+    assert fitted and not FusionParams().drift_known
+    # met by a young filter: not counted to its end, though it settles
+    assert [run.add(True, s, fitted) for s in (False, True, True)] == \
+        [0, 0, 0]
+    # a scan that sounds like the survey ends it; the next is counted
+    assert [run.add(u, True, fitted) for u in (False, True, True, True)] \
+        == [0, 1, 2, 3]
+    run.clear()     # the filter started afresh: a new run, young again
+    assert run.add(True, False, fitted) == 0
+    # the drift not fitted: odometry cannot be followed through a hole
+    assert [run.add(u, True, False) for u in (False, True, True)] == \
+        [0, 0, 0]
 
 
 def test_an_odometry_jump_starts_the_scans_track_again():

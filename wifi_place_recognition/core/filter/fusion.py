@@ -30,7 +30,9 @@ trusted: its misfit to odometry over the last seconds
 (:class:`.track_misfit.TrackMisfit`) widens it (the scans it widened are
 counted: ``scans_off_track``), and so does the recent scans' mismatch
 with the survey (:class:`.mismatch.RecentMismatch`; the scans widened
-more than halfway: ``scans_unlike_survey``). When the scans keep
+more than halfway: ``scans_unlike_survey``), the more the longer they
+have sounded unlike it to a settled filter that knows the odometry's
+drift (:class:`.mismatch.UnlikeRun`: a hole's scans count about as one). When the scans keep
 disagreeing with the particles (a kidnapped robot:
 :meth:`.particles.ParticleFilter.update`), the filter starts afresh at
 the first of the last ``reset_after`` scans and applies them again with
@@ -57,7 +59,7 @@ import numpy as np
 from ..place_switch import PlaceSwitch
 from .angles import wrap
 from .hindsight import Hindsight
-from .mismatch import RecentMismatch
+from .mismatch import RecentMismatch, UnlikeRun
 from .particles import DISAGREED, ParticleFilter, UNKNOWN_VARIANCE
 from .pose_spread import ScanOffsets
 from .track_misfit import TrackMisfit
@@ -139,6 +141,7 @@ class Fusion:
         self.misfit = TrackMisfit(self.filter.params.track_s)
         self.offsets = ScanOffsets(self.filter.params.pose_scans)
         self.mismatch = RecentMismatch(self.filter.params.mismatch_scans)
+        self.unlike_run = UnlikeRun()
         self.hindsight = Hindsight(self.filter.params, self.filter.motion)
         self.limits = limits or FusionLimits()
         self.counts = Counter()
@@ -160,6 +163,7 @@ class Fusion:
         self.offsets.clear()    # the recent scans' offsets from the pose
         self.hindsight.clear()  # the filter's past poses
         self.mismatch.clear()   # the recent scans' mismatch
+        self.unlike_run.clear()  # how long they have sounded unlike it
         self.spread = 0.0       # the particles' variance at the last scan
         self.applied = deque(maxlen=self.filter.params.reset_after)
         #                         the last scans applied with odometry since
@@ -386,6 +390,7 @@ class Fusion:
         if restart:
             self.filter.start(xy)
             self.offsets.clear()
+            self.unlike_run.clear()
             self.place = place
         if not odometry or restart:     # the scans' track starts again
             self.misfit.clear()
@@ -397,6 +402,12 @@ class Fusion:
             sensor = self.filter.sensor
             recent = self.mismatch.add(mismatch)
             scan = sensor.measurement(xy, sigma, misfit, coverage, recent)
+            run = self.unlike_run.add(sensor.sounds_like_survey(scan) < 1.0,
+                                      self.offsets.settled,
+                                      self.filter.params.drift_known)
+            if run:
+                scan = sensor.measurement(xy, sigma, misfit, coverage,
+                                          recent, run)
             self.counts['scans_off_track'] += sensor.off_track(scan)
             self.counts['scans_unlike_survey'] += \
                 sensor.sounds_like_survey(scan) < 0.5
@@ -410,6 +421,7 @@ class Fusion:
                 restart = True
                 self.misfit.clear()
                 self.offsets.clear()
+                self.unlike_run.clear()
                 self.hindsight.clear()
                 if why == DISAGREED and \
                         len(self.applied) == self.applied.maxlen:

@@ -11,8 +11,8 @@ carried forward by odometry, is where the robot is when the scans agree
 with it again.
 
 :class:`Hindsight` keeps such poses when the odometry's heading drift
-is known (a prior of at most :data:`MAX_DRIFT_SD`, as ``fit_odometry``
-writes) and every scan is believed (``coverage_full`` 0, the default;
+is known (:attr:`.particles.FusionParams.drift_known`, as
+``fit_odometry`` writes it) and every scan is believed (``coverage_full`` 0, the default;
 with scans weighed by coverage, those off the survey no longer drag the
 pose, the filter crosses a hole on odometry, and scans still biased at
 the hole's edge agreed with a past pose gone astray): one every
@@ -35,12 +35,6 @@ import numpy as np
 
 from .pose_spread import SETTLE_SCANS
 
-#: Poses are kept only with a drift prior this narrow (rad per m;
-#: ``fit_odometry`` writes its fit's standard error, at least 0.005, 0.005
-#: on the shared runs; the default 0.04 is a drift not known):
-#: a pose carried with a drift not yet learned goes astray, and scans
-#: biased the same way for seconds can then agree with it.
-MAX_DRIFT_SD = 0.01
 #: A pose is kept every so many seconds (s).
 EVERY_S = 10.0
 #: ... while the filter's heading is known to this standard deviation.
@@ -62,14 +56,15 @@ class Hindsight:
     ``params``: the filter's :class:`.particles.FusionParams`
     (``hindsight_s``: how long a pose is kept, 0: none; ``hindsight_m``:
     the filter's mean offset from the scans from which a kept pose can
-    win; none kept with ``drift_sd`` above :data:`MAX_DRIFT_SD` or
-    ``coverage_full`` above 0); ``motion``: the filter's
+    win; none kept with the drift not known, ``drift_known``: scans
+    biased the same way for seconds could agree with a pose gone astray,
+    or ``coverage_full`` above 0); ``motion``: the filter's
     :class:`.motion.MotionModel`.
     """
 
     def __init__(self, params, motion):
         self.keep_s = float(params.hindsight_s) if \
-            params.drift_sd <= MAX_DRIFT_SD and not params.coverage_full \
+            params.drift_known and not params.coverage_full \
             else 0.0
         self.offset_m = float(params.hindsight_m)
         self.motion = motion

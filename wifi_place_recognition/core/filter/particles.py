@@ -22,6 +22,13 @@ from .sensor import WifiSensorModel
 
 #: Variance (rad^2) of a heading the filter does not know.
 UNKNOWN_VARIANCE = 1e6
+#: The odometry's drift is known with a prior this narrow (rad per m;
+#: ``fit_odometry`` writes its fit's standard error, at least 0.005, 0.005
+#: on the shared runs; the default 0.04 is a drift not known): only then
+#: may the pose be carried on odometry alone (hindsight's past poses, a
+#: long run of scans unlike the survey), which with a drift not yet
+#: learned goes astray.
+KNOWN_DRIFT_SD = 0.01
 #: Below this mean resultant length of the headings, the yaw is unknown.
 MIN_RESULTANT = 0.5
 #: The reported position is the mean of the particles heading within this
@@ -66,6 +73,12 @@ class FusionParams(SectionParams):
     #                                   mismatch ...
     mismatch_none: float = 1.6        # ... and mismatch_width from this many
     mismatch_width: float = 16.0      # m
+    mismatch_run_power: float = 0.5   # a run of scans that sound unlike
+    #                                   the survey, met by a settled
+    #                                   filter with the drift fitted: each
+    #                                   widened by the run's length to
+    #                                   this power (0: not;
+    #                                   .mismatch.UnlikeRun)
     start_sd: float = 3.0             # m: spread of a start around a scan
     reset_sigmas: float = 3.0         # a scan this many sd off disagrees
     reset_track_sigmas: float = 2.0   # one its misfit did not widen: from
@@ -107,9 +120,17 @@ class FusionParams(SectionParams):
                              f'{self.mismatch_full!r}, mismatch_none = '
                              f'{self.mismatch_none!r}: expected 0 < '
                              f'mismatch_full < mismatch_none')
+        if self.mismatch_run_power > 1:
+            raise ValueError(f'fusion parameter mismatch_run_power = '
+                             f'{self.mismatch_run_power!r}: expected 0 to 1')
         if self.wifi_outlier >= 1:
             raise ValueError(f'fusion parameter wifi_outlier = '
                              f'{self.wifi_outlier!r}: expected < 1')
+
+    @property
+    def drift_known(self):
+        """Return True when the drift prior is narrow (:data:`KNOWN_DRIFT_SD`)."""
+        return self.drift_sd <= KNOWN_DRIFT_SD
 
     def to_dict(self):
         """

@@ -25,6 +25,9 @@ class WifiPosition:
     coverage: float = None     # P(taken where the survey covers); None: 1
     mismatch: float = None     # the recent scans' mismatch over the
     #                            survey's usual (.mismatch); None: not known
+    unlike_run: int = 0        # scans in a row, this one included, that
+    #                            sounded unlike the survey to a settled
+    #                            filter (.mismatch.UnlikeRun); 0: none
 
     @property
     def covered(self):
@@ -51,6 +54,12 @@ class WifiSensorModel:
     ``wifi_sd`` up to ``mismatch_full`` times the survey's usual, and
     ``mismatch_width`` from ``mismatch_none`` times; they still hold the
     particles together, a hole's scans lying near where the robot is.
+    A hole's scans are placed at the same surveyed stretch all along it,
+    so a run of them counts about as one: met by a settled filter that
+    knows the odometry's drift (:class:`.mismatch.UnlikeRun`), each
+    is widened by the run's length (its ``unlike_run``) to the power
+    ``mismatch_run_power`` beyond ``wifi_sd``, and the pose follows
+    odometry through a long hole instead of being dragged along it.
     With ``coverage_full`` > 0 a scan counts as far as it was likely
     taken where the survey covers (its ``coverage``): one likely off the
     survey moves the particles little and never counts towards a
@@ -69,12 +78,14 @@ class WifiSensorModel:
         if scan.misfit is not None:
             width = max(width, p.track_scale * scan.misfit)
         unlike = 1.0 - self.sounds_like_survey(scan)
+        run = max(scan.unlike_run, 1) ** p.mismatch_run_power
         return max(width,
-                   p.wifi_sd + unlike * (p.mismatch_width - p.wifi_sd))
+                   p.wifi_sd + unlike * run * (p.mismatch_width - p.wifi_sd))
 
-    def measurement(self, xy, sigma, misfit, coverage=None, mismatch=None):
+    def measurement(self, xy, sigma, misfit, coverage=None, mismatch=None,
+                    unlike_run=0):
         """Return the :class:`WifiPosition` of a scan's answer."""
-        return WifiPosition(xy, sigma, misfit, coverage, mismatch)
+        return WifiPosition(xy, sigma, misfit, coverage, mismatch, unlike_run)
 
     def off_track(self, scan):
         """Return True when the scan's misfit widened it."""
