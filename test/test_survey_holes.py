@@ -258,6 +258,17 @@ def test_a_run_of_unlike_scans_counts_once_the_filter_settled():
     # the drift not fitted: odometry cannot be followed through a hole
     assert [run.add(u, True, False) for u in (False, True, True)] == \
         [0, 0, 0]
+    # the filter keeps none across a set pose or an odometry jump
+    fusion = Fusion(FusionParams(drift_sd=0.005))
+    for forget in (lambda: fusion.set_pose(0.0, (0.0, 0.0), 0.0, 0.5, 0.1,
+                                           (0, 0)),
+                   lambda: fusion.odometry(1.0, 0.0, 0.0, 0.0) and
+                   fusion.odometry(1.1, 50.0, 0.0, 0.0)):
+        fusion.unlike_run.add(False, True, True)     # no run yet
+        fusion.unlike_run.add(True, True, True)
+        assert fusion.unlike_run.add(True, True, True) == 2
+        forget()
+        assert fusion.unlike_run.add(True, False, True) == 0
 
 
 def test_an_odometry_jump_starts_the_scans_track_again():

@@ -211,6 +211,7 @@ class Fusion:
         self.switch.reset()
         self.misfit.clear()
         self.offsets.clear()
+        self.unlike_run.clear()
         self.hindsight.clear()
         self.applied.clear()
         self.last_scan = stamp
@@ -267,6 +268,7 @@ class Fusion:
         self.odom.append(pose)
         self.misfit.clear()
         self.hindsight.clear()  # carried by the old frame's odometry
+        self.unlike_run.clear()  # followed on the old frame's odometry
         self.applied.clear()    # their odometry poses: the old frame
         if self.anchor is not None:
             self.anchor = pose
@@ -394,6 +396,7 @@ class Fusion:
             self.place = place
         if not odometry or restart:     # the scans' track starts again
             self.misfit.clear()
+            self.unlike_run.clear()     # no odometry to follow through it
             self.applied.clear()
             self.hindsight.clear()
         if place is not None:

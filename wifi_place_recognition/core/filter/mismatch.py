@@ -49,11 +49,14 @@ class UnlikeRun:
     (:attr:`.pose_spread.ScanOffsets.settled`: its heading known, its
     pose where the scans have said for a while) with the odometry's drift
     known (:attr:`.particles.FusionParams.drift_known`: without, a pose
-    that follows odometry through a long hole goes astray,
-    ``benchmarks/fusion.py`` not fitted: b24's largest error after 60 s
-    6.7 -> 15.9 m). A young filter may hold a wrong
-    heading that those scans still correct, so a run it meets is not
-    counted, to its end.
+    that follows odometry through a long hole goes astray;
+    ``benchmarks/fusion.py`` run before this rule, not fitted: b24's
+    largest error after 60 s 6.7 -> 15.9 m). A young filter may hold a
+    wrong heading that those scans still correct, so a run it meets is
+    not counted, to its end; nor is one without odometry (the scans
+    applied alone, or after an odometry jump: :class:`.fusion.Fusion`
+    clears it). With ``pose_scans`` 0 the filter never settles
+    (:class:`.pose_spread.ScanOffsets` keeps nothing): no run counts.
     """
 
     def __init__(self):

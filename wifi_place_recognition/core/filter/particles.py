@@ -75,9 +75,10 @@ class FusionParams(SectionParams):
     mismatch_width: float = 16.0      # m
     mismatch_run_power: float = 0.5   # a run of scans that sound unlike
     #                                   the survey, met by a settled
-    #                                   filter with the drift fitted: each
-    #                                   widened by the run's length to
-    #                                   this power (0: not;
+    #                                   filter (pose_scans > 0) with the
+    #                                   drift known: each widened by the
+    #                                   run's length to this power (0:
+    #                                   each alike, round 34's;
     #                                   .mismatch.UnlikeRun)
     start_sd: float = 3.0             # m: spread of a start around a scan
     reset_sigmas: float = 3.0         # a scan this many sd off disagrees
