@@ -32,8 +32,8 @@ counted: ``scans_off_track``), and so does the recent scans' mismatch
 with the survey (:class:`.mismatch.RecentMismatch`; the scans widened
 more than halfway: ``scans_unlike_survey``), the more the longer they
 have sounded unlike it to a settled filter that knows the odometry's
-drift (:class:`.mismatch.UnlikeRun`: a hole's scans count about as one). When the scans keep
-disagreeing with the particles (a kidnapped robot:
+drift (:class:`.mismatch.UnlikeRun`: a hole's scans count about as
+one). When the scans keep disagreeing with the particles (a kidnapped robot:
 :meth:`.particles.ParticleFilter.update`), the filter starts afresh at
 the first of the last ``reset_after`` scans and applies them again with
 the odometry between them (when each of them was applied with odometry):
@@ -392,11 +392,10 @@ class Fusion:
         if restart:
             self.filter.start(xy)
             self.offsets.clear()
-            self.unlike_run.clear()
             self.place = place
         if not odometry or restart:     # the scans' track starts again
             self.misfit.clear()
-            self.unlike_run.clear()     # no odometry to follow through it
+            self.unlike_run.clear()     # no odometry to follow, or young
             self.applied.clear()
             self.hindsight.clear()
         if place is not None:

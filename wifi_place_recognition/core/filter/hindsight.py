@@ -12,10 +12,11 @@ with it again.
 
 :class:`Hindsight` keeps such poses when the odometry's heading drift
 is known (:attr:`.particles.FusionParams.drift_known`, as
-``fit_odometry`` writes it) and every scan is believed (``coverage_full`` 0, the default;
-with scans weighed by coverage, those off the survey no longer drag the
-pose, the filter crosses a hole on odometry, and scans still biased at
-the hole's edge agreed with a past pose gone astray): one every
+``fit_odometry`` writes it) and every scan is believed
+(``coverage_full`` 0, the default; with scans weighed by coverage, those
+off the survey no longer drag the pose, the filter crosses a hole on
+odometry, and scans still biased at the hole's edge agreed with a past
+pose gone astray): one every
 :data:`EVERY_S` seconds once the heading has been known for
 :data:`.pose_spread.SETTLE_SCANS` scans in a row and while its standard
 deviation is at most :data:`MAX_YAW_SD`, for ``hindsight_s`` seconds,
