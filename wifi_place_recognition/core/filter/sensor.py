@@ -59,7 +59,8 @@ class WifiSensorModel:
     knows the odometry's drift (:class:`.mismatch.UnlikeRun`), each
     is widened by the run's length (its ``unlike_run``) to the power
     ``mismatch_run_power`` beyond ``wifi_sd``, and the pose follows
-    odometry through a long hole instead of being dragged along it.
+    odometry through a long hole instead of being dragged along it; the
+    run widens the pull only, not the restart test (:meth:`disagrees`).
     With ``coverage_full`` > 0 a scan counts as far as it was likely
     taken where the survey covers (its ``coverage``): one likely off the
     survey moves the particles little and never counts towards a
@@ -100,8 +101,10 @@ class WifiSensorModel:
         Return True when ``scan`` lies reset_sigmas sd off the particles.
 
         ``xy``, ``cov``: the particles' mean position and its covariance.
-        With the scan's width before its misfit: scans that jump away from
-        odometry for good (a kidnapped robot) keep disagreeing. A scan
+        With the scan's width before its misfit and its run of unlike
+        scans: scans that jump away from odometry for good (a kidnapped
+        robot) keep disagreeing, even while they sound unlike the survey
+        (a robot carried into a hole is found there). A scan
         whose misfit did not widen it (the recent scans move as odometry
         says) disagrees from ``reset_track_sigmas`` sd (2 by default; 0:
         as any): a robot carried about a scan's 3 sd (12 m) is found
@@ -113,7 +116,7 @@ class WifiSensorModel:
         if not self.testifies(scan):
             return False
         p = self.params
-        width = self.width(replace(scan, misfit=None))
+        width = self.width(replace(scan, misfit=None, unlike_run=0))
         cov = cov + np.eye(2) * width ** 2
         delta = scan.xy - xy
         limit = p.reset_sigmas
