@@ -10,8 +10,9 @@ odometry in stamp order through :func:`core.filter.trajectory.fuse_offline`
 and the defaults (drift not fitted); both also without the scans'
 mismatch (``mismatch_scans`` 0: round 23's filter, in the same run);
 fitted, also with a run of scans that sound unlike the survey each widened
-alike however long it lasts (``mismatch_run_power`` 0: round 34's filter,
-in the same run, on the pairs and the kidnaps). Started with no prior
+alike however long it lasts (``mismatch_run_power`` 0: round 34's filter
+with round 36's hindsight, in the same run, on the pairs and the
+kidnaps). Started with no prior
 (the first scan, every heading); seeds 0, 1, 2 of the filter.
 
 Each pair twice: with the training run whole, and with survey holes: a

@@ -2,8 +2,9 @@
 Hindsight without ROS: the filter's past poses carried by odometry.
 
 A kept pose moves with odometry exactly (no noise, its drift turning
-it); it wins only when the last scans agree with it and lie far from the
-filter, and is not kept before the heading has settled, nor with a drift
+it); it wins only when the last scans agree with it, lie far from the
+filter and sound like the survey, and is not kept before the heading
+has settled, nor with a drift
 not known (not fitted) or scans weighed by coverage; the cloud moves
 there rigidly. Through
 :class:`Fusion`: a scripted drive whose scans lie 5 m aside for a minute
@@ -113,6 +114,20 @@ def test_a_kept_pose_wins_when_the_scans_agree_with_it_not_the_filter():
     assert h.stamps.size == 0
 
 
+def test_no_pose_wins_on_a_scan_that_sounds_unlike_the_survey():
+    # inside a hole the scans lie metres aside and may agree with a kept
+    # pose by chance: compared, but no pose wins on them
+    h = settled()
+    for k in range(2 * SCANS):
+        assert h.check(60.0 + k, np.array([0.5, 0.0]), np.array([0.5, 5.0]),
+                       like_survey=False) is None
+    assert h.stamps.size == 1
+    # once the last SCANS scans sounded like the survey, the pose wins
+    assert scans_at(h, 70.0, (0.5, 0.0), (0.5, 5.0), SCANS - 1) is None
+    assert h.check(80.0, np.array([0.5, 0.0]), np.array([0.5, 5.0])) == \
+        pytest.approx((0.0, 0.0, 0.0))
+
+
 def test_the_oldest_pose_wins_and_the_older_ones_are_compared_anew():
     h = settled()                               # (0, 0), kept at 0 s
     h.keep(10.0, estimate(0, 3), 0.0, True)     # (0, 3), kept at 10 s
@@ -142,12 +157,14 @@ def test_the_cloud_moves_rigidly_to_a_pose():
     assert after.cov[1, 1] == pytest.approx(before.cov[0, 0], rel=1e-3)
 
 
-def twin_drive(params, start=40.0, end=100.0, laps=1.7):
+def twin_drive(params, start=40.0, end=100.0, laps=1.7, unlike_s=0.0):
     """
     Return (errors, in the twin, fusion) of a drive round a square.
 
     Odometry without drift, a scan a second 1 m noisy, 5 m aside (-y)
-    from ``start`` to ``end`` s.
+    from ``start`` to ``end`` s; for ``unlike_s`` s after ``end`` the
+    scans' mismatch is twice the usual, the usual after that (not known
+    before ``end``, nor with ``unlike_s`` 0).
     """
     fusion = Fusion(params, seed=0)
     truth = square(laps=laps)
@@ -162,7 +179,10 @@ def twin_drive(params, start=40.0, end=100.0, laps=1.7):
         t, x, y, _ = truth[i]
         inside = start <= t - truth[0, 0] < end
         scan = np.array([x, y - 5.0 * inside]) + rng.normal(0, 1.0, 2)
-        pose = fusion.scan(t, scan, (0, 0))[-1]
+        since = t - truth[0, 0] - end
+        mismatch = None if since < 0 or not unlike_s else \
+            2.0 if since < unlike_s else 1.0
+        pose = fusion.scan(t, scan, (0, 0), mismatch=mismatch)[-1]
         errors.append(math.hypot(pose.xy[0] - x, pose.xy[1] - y))
         twin.append(inside)
     return np.array(errors), np.array(twin), fusion
@@ -180,6 +200,17 @@ def test_a_pose_dragged_by_a_twin_is_moved_back_to_where_odometry_says():
         errors, _, fusion = twin_drive(params)      # off; drift not known
         assert fusion.counts['hindsight_moves'] == 0
         assert errors[after:after + 10].min() > 2.0, errors[after:]
+
+
+def test_no_pose_is_gone_back_to_while_the_scans_sound_unlike_the_survey():
+    # the 8 s after the twin sound unlike the survey: the move waits until
+    # the last 5 scans sounded like it (the mismatch, averaged over 5
+    # scans, clears 4 s after they end), 16 s after the twin (2 s without)
+    errors, twin, fusion = twin_drive(FITTED, unlike_s=8.0)
+    after = np.flatnonzero(twin)[-1] + 1
+    assert fusion.counts['hindsight_moves'] == 1
+    assert errors[after:after + 12].min() > 2.0, errors[after:]
+    assert errors[after + 17:after + 30].max() < 1.0, errors[after:]
 
 
 def test_no_pose_to_go_back_to_when_the_twin_comes_before_the_heading():

@@ -340,6 +340,12 @@ def test_a_scan_on_track_disagrees_sooner():
     # as far as 3 sd, any scan disagrees
     assert sensor.disagrees(np.zeros(2), cov, WifiPosition(
         np.array([13.0, 0.0]), misfit=3.0))
+    # a run of unlike scans changes neither the width nor the limit: 20 m
+    # off is 2.3 sd of a scan 8.8 m wide (mismatch 1.3), off its track
+    for run in (0, 30):
+        assert not sensor.disagrees(np.zeros(2), cov, WifiPosition(
+            np.array([20.0, 0.0]), misfit=8.0, mismatch=1.3,
+            unlike_run=run))
     pf = ParticleFilter(params, seed=0)
     pf.start(np.zeros(2), sd=0.5)
     why = [pf.update(on) for _ in range(params.reset_after)]

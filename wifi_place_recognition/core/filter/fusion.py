@@ -40,9 +40,9 @@ the odometry between them (when each of them was applied with odometry):
 it restarts with their evidence, not one scan's.
 A pose dragged aside by scans from a place the survey took for another
 is moved back to a past pose of the filter carried forward by odometry
-once the recent scans agree with that one and not with it
-(:mod:`.hindsight`: with a fitted drift, every scan believed; counted:
-``hindsight_moves``).
+once the recent scans agree with that one and not with it, and sound
+like the survey (:mod:`.hindsight`: with a fitted drift, every scan
+believed; counted: ``hindsight_moves``).
 Between scans the particles move up to ``move_lag`` behind the newest
 odometry. Once the filter has settled, the pose's covariance on x and y
 is how far the last ``pose_scans`` scans lie from it
@@ -404,8 +404,8 @@ class Fusion:
             sensor = self.filter.sensor
             recent = self.mismatch.add(mismatch)
             scan = sensor.measurement(xy, sigma, misfit, coverage, recent)
-            run = self.unlike_run.add(sensor.sounds_like_survey(scan) < 1.0,
-                                      self.offsets.settled,
+            unlike = sensor.sounds_like_survey(scan) < 1.0
+            run = self.unlike_run.add(unlike, self.offsets.settled,
                                       self.filter.params.drift_known)
             if run:
                 scan = sensor.measurement(xy, sigma, misfit, coverage,
@@ -430,7 +430,7 @@ class Fusion:
                     self._replay()
                 self.applied.clear()
             elif before is not None:
-                self._look_back(stamp, xy, before)
+                self._look_back(stamp, xy, before, not unlike)
         self.counts['restarts'] += restart
         self.last_scan = stamp
         self.counts['scans_fused' if odometry else 'scans_alone'] += 1
@@ -446,9 +446,9 @@ class Fusion:
                          self._covariance(estimate), odometry, restart,
                          self.place)
 
-    def _look_back(self, stamp, xy, before):
+    def _look_back(self, stamp, xy, before, like_survey):
         """Move the particles to a past pose the last scans favour."""
-        pose = self.hindsight.check(stamp, xy, before)
+        pose = self.hindsight.check(stamp, xy, before, like_survey)
         if pose is not None:
             self.filter.shift(pose[:2], pose[2])
             self.counts['hindsight_moves'] += 1

@@ -27,7 +27,10 @@ each was applied) with their mean offset from each kept pose: when the
 filter's is longer than ``hindsight_m`` and a pose kept at least
 :data:`MIN_AGE_S` ago, at least :data:`MIN_MOVE_M` away, has at most
 :data:`RATIO` of it, the filter moves there (to the oldest such pose;
-the poses kept after it are dropped, the older compared anew). ROS-free.
+the poses kept after it are dropped, the older compared anew). No pose
+wins unless those scans all sounded like the survey: inside a hole the
+scans lie metres aside and may agree with a kept pose by chance.
+ROS-free.
 """
 
 import math
@@ -81,6 +84,7 @@ class Hindsight:
         self.slot = 0                       # where the next scan's go
         self.last = None    # when the last pose was kept
         self.known = 0      # scans in a row with the heading known
+        self.like = 0       # scans in a row that sounded like the survey
 
     def move(self, forward, lateral, turn):
         """Carry every kept pose by one odometry step."""
@@ -113,17 +117,21 @@ class Hindsight:
             a[rows] for a in (self.stamps, self.state, self.offsets,
                               self.seen))
 
-    def check(self, stamp, xy, before):
+    def check(self, stamp, xy, before, like_survey=True):
         """
         Return the kept pose (x, y, yaw) the last scans favour, or None.
 
         ``xy``: the scan's position; ``before``: the filter's position
-        before the scan was applied. The oldest pose that wins is
-        returned (kept before a drag began; the younger may have been
-        kept during it); it and the younger are dropped, the older are
-        compared anew (one may win once the scans of the drag have left
-        their window). Poses older than ``keep_s`` are dropped.
+        before the scan was applied; ``like_survey``: False when the scan
+        sounds unlike the survey (its offsets are still recorded; no pose
+        wins until the last :data:`SCANS` scans sounded like it). The
+        oldest pose that wins is returned (kept before a drag began; the
+        younger may have been kept during it); it and the younger are
+        dropped, the older are compared anew (one may win once the scans
+        of the drag have left their window). Poses older than ``keep_s``
+        are dropped.
         """
+        self.like = self.like + 1 if like_survey else 0
         if self.stamps.size and stamp - self.stamps[0] > self.keep_s:
             self._keep_only(stamp - self.stamps <= self.keep_s)  # in order
         if not self.stamps.size:
@@ -137,7 +145,7 @@ class Hindsight:
         away = np.hypot(*(self.state[:, :2] - before).T)
         wins = (stamp - self.stamps >= MIN_AGE_S) & (self.seen >= SCANS) & \
             (theirs <= RATIO * own) & (away >= MIN_MOVE_M)
-        if own <= self.offset_m or not wins.any():
+        if self.like < SCANS or own <= self.offset_m or not wins.any():
             return None
         i = int(np.argmax(wins))            # the oldest
         pose = tuple(float(v) for v in self.state[i, :3])

@@ -101,12 +101,12 @@ class WifiSensorModel:
         Return True when ``scan`` lies reset_sigmas sd off the particles.
 
         ``xy``, ``cov``: the particles' mean position and its covariance.
-        With the scan's width before its misfit and its run of unlike
-        scans: scans that jump away from odometry for good (a kidnapped
-        robot) keep disagreeing, even while they sound unlike the survey
-        (a robot carried into a hole is found there). A scan
-        whose misfit did not widen it (the recent scans move as odometry
-        says) disagrees from ``reset_track_sigmas`` sd (2 by default; 0:
+        With the scan's width before its misfit, and as if no run of
+        unlike scans had widened it: scans that jump away from odometry
+        for good (a kidnapped robot) keep disagreeing, even while they
+        sound unlike the survey (a robot carried into a hole is found
+        there). A scan whose misfit did not widen it (the recent scans
+        move as odometry says) disagrees from ``reset_track_sigmas`` sd (2 by default; 0:
         as any): a robot carried about a scan's 3 sd (12 m) is found
         sooner. So would the scans of a hole beside a parallel surveyed
         stretch, which move as odometry says too, if they sounded like
@@ -116,7 +116,8 @@ class WifiSensorModel:
         if not self.testifies(scan):
             return False
         p = self.params
-        width = self.width(replace(scan, misfit=None, unlike_run=0))
+        scan = replace(scan, unlike_run=0)
+        width = self.width(replace(scan, misfit=None))
         cov = cov + np.eye(2) * width ** 2
         delta = scan.xy - xy
         limit = p.reset_sigmas
