@@ -106,9 +106,9 @@ class WifiSensorModel:
         for good (a kidnapped robot) keep disagreeing, even while they
         sound unlike the survey (a robot carried into a hole is found
         there). A scan whose misfit did not widen it (the recent scans
-        move as odometry says) disagrees from ``reset_track_sigmas`` sd (2 by default; 0:
-        as any): a robot carried about a scan's 3 sd (12 m) is found
-        sooner. So would the scans of a hole beside a parallel surveyed
+        move as odometry says) disagrees from ``reset_track_sigmas`` sd
+        (2 by default; 0: as any): a robot carried about a scan's 3 sd
+        (12 m) is found sooner. So would the scans of a hole beside a parallel surveyed
         stretch, which move as odometry says too, if they sounded like
         the survey (the mismatch widens them) and fitted odometry within
         half a scan's width (their misfit widens them otherwise).
