@@ -41,7 +41,8 @@ the holes as above (without the scans' mismatch: a bound where many
 do, slower where a splice needs the mismatch; and with it); on every
 run, how near
 the filter came to a restart (the most of ``reset_window`` scans that
-disagreed); each run's drift over stretches of 20 m from its truth
+disagreed) and how often the hindsight moved the pose (since round 36);
+each run's drift over stretches of 20 m from its truth
 (:func:`drift_steadiness`). And leaving
 a hole (:func:`hole_exits`): where the robot comes back to covered
 ground for at least 30 s after at least 10 scans in a hole, how far off
@@ -308,10 +309,11 @@ def detector_figures(coverage, hole, ok):
 
 def localise(params, odometry, stamps, single, seed, start=None):
     """
-    Return the fused (xy, yaw, cov) at every scan, and the margin.
+    Return the fused (xy, yaw, cov) at every scan, the margin, the moves.
 
     The margin: the most of ``reset_window`` scans that disagreed with the
-    filter (``reset_after`` restart it). ``start``: (stamp, xy, yaw) set
+    filter (``reset_after`` restart it); the moves: how often the
+    hindsight moved the pose. ``start``: (stamp, xy, yaw) set
     on the filter first (``set_pose``, :data:`SET_START_SD`); None: the
     filter starts from the first scan.
     """
@@ -319,7 +321,7 @@ def localise(params, odometry, stamps, single, seed, start=None):
     if start is not None:
         fusion.set_pose(*start, *SET_START_SD, (0, 0))
     return (*fuse_offline(odometry, (stamps, *single), fusion),
-            fusion.filter.most_disagreeing)
+            fusion.filter.most_disagreeing, fusion.counts['hindsight_moves'])
 
 
 def in_holes(xy, kept):
@@ -352,8 +354,8 @@ def fused_figures(test, single, params, hole, seeds=SEEDS, start=False):
         at = np.flatnonzero(np.isfinite(test.xy).all(axis=1))[0]
         start = (test.stamps[at], test.xy[at], test.yaw[at])
     for seed in seeds:
-        xy, yaw, cov, most = localise(params, test.odometry, test.stamps,
-                                      single, seed, start or None)
+        xy, yaw, cov, most, moves = localise(
+            params, test.odometry, test.stamps, single, seed, start or None)
         s = score(test.stamps, test.xy, xy, test.yaw, yaw, cov,
                   settle_s=SETTLE_S)
         error = np.linalg.norm(xy - test.xy, axis=1)
@@ -361,6 +363,7 @@ def fused_figures(test, single, params, hole, seeds=SEEDS, start=False):
             else math.nan
         s['hole_exits'] = hole_exits(test.stamps, error, hole)
         s['most_disagreeing'] = most
+        s['hindsight_moves'] = moves
         runs.append(s)
         first = xy if first is None else first
     return runs, first
@@ -968,6 +971,11 @@ def main():
     params = FusionParams()
     print(f'the most of {params.reset_window} scans that disagreed on a run '
           f'(fitted): {most} (a restart: {params.reset_after}; {where})')
+    for row, name in (('fused_fitted', 'fitted'),
+                      ('fused_set_start', 'set at the first true pose')):
+        print(f'hindsight moves, every pair, survey and seed, {name}: '
+              + str(sum(r['hindsight_moves'] for key in ('pairs', 'holes')
+                        for f in results[key].values() for r in f[row])))
     with atomic_write(args.out or RESULTS / 'fusion.json', 'w') as f:
         json.dump(results, f, indent=1)
     print(f'wrote {args.out or RESULTS / "fusion.json"}')

@@ -171,3 +171,29 @@ def test_what_limits_a_pair_is_told_goal_by_goal(fusion):
     assert limited['ratio'] == [] and 'yaw' in limited
     assert 'ratio (neither alone); p95 (told the start or told the holes)' \
         in fusion.limits_line('a <- b', 'full', limited)
+
+
+def test_the_hindsights_moves_are_counted_per_run(fusion):
+    # round a square with the drift known; the scans 5 m aside from 40 to
+    # 100 s (a twin corridor) drag the pose, and the hindsight moves it
+    # back once: counted per seed; none with hindsight_s 0
+    from dataclasses import replace
+    from test_fusion_node import odometry_of, square
+    from wifi_place_recognition.core.filter.particles import FusionParams
+    truth = square(laps=1.7)
+    at = truth[9::10]
+    twin = (at[:, 0] - truth[0, 0] >= 40) & (at[:, 0] - truth[0, 0] < 100)
+    xy = at[:, 1:3] + np.random.default_rng(1).normal(0, 1.0, (len(at), 2))
+    xy[twin, 1] -= 5.0
+    test = SimpleNamespace(stamps=at[:, 0], xy=at[:, 1:3], yaw=at[:, 3],
+                           odometry=odometry_of(truth, drift=0.0))
+    single = (xy, np.full(len(at), np.nan), np.full(len(at), np.nan),
+              np.full(len(at), np.nan))
+    fitted = FusionParams(drift_sd=0.005)
+    hole = np.zeros(len(at), bool)
+    runs, _ = fusion.fused_figures(test, single, fitted, hole, seeds=(0,))
+    assert runs[0]['hindsight_moves'] == 1
+    runs, _ = fusion.fused_figures(test, single,
+                                   replace(fitted, hindsight_s=0), hole,
+                                   seeds=(0,))
+    assert runs[0]['hindsight_moves'] == 0

@@ -108,10 +108,11 @@ class WifiSensorModel:
         there). A scan whose misfit did not widen it (the recent scans
         move as odometry says) disagrees from ``reset_track_sigmas`` sd
         (2 by default; 0: as any): a robot carried about a scan's 3 sd
-        (12 m) is found sooner. So would the scans of a hole beside a parallel surveyed
-        stretch, which move as odometry says too, if they sounded like
-        the survey (the mismatch widens them) and fitted odometry within
-        half a scan's width (their misfit widens them otherwise).
+        (12 m) is found sooner. So would the scans of a hole beside a
+        parallel surveyed stretch, which move as odometry says too, if
+        they sounded like the survey (the mismatch widens them) and fitted
+        odometry within half a scan's width (their misfit widens them
+        otherwise).
         """
         if not self.testifies(scan):
             return False
