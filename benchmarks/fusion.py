@@ -55,9 +55,7 @@ how many pair/surveys meet every goal on every seed, for the three.
 The filter's defaults were chosen by leave-one-building-out on these
 runs (``--select``: candidates scored on each building, seed 0, full and
 holes; see ``doc/results.md``), never on the pair they are reported on
-alone; ``mismatch_run_power`` (round 35) by a scratch harness on the same
-runs, seeds 0-2, among 0.25, 0.5 and 1, not yet among ``--select``'s
-candidates. Table on stdout, JSON in ``benchmarks/results/fusion.json`` (with
+alone. Table on stdout, JSON in ``benchmarks/results/fusion.json`` (with
 one run's trajectories per building, seed 0, which
 ``benchmarks/figures.py`` draws).
 
@@ -176,6 +174,10 @@ CANDIDATES = (
     {'mismatch_width': 24.0, 'mismatch_full': 1.0, 'mismatch_none': 1.4},
     {'mismatch_scans': 3},
     {'mismatch_scans': 10},
+    {'mismatch_run_power': 0.0},    # each unlike scan alike (round 34)
+    {'mismatch_run_power': 0.25},
+    {'mismatch_run_power': 1.0},
+    {'coverage_full': 0.5},         # scans weighed by their coverage
 )
 
 
