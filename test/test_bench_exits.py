@@ -197,3 +197,15 @@ def test_the_hindsights_moves_are_counted_per_run(fusion):
                                    replace(fitted, hindsight_s=0), hole,
                                    seeds=(0,))
     assert runs[0]['hindsight_moves'] == 0
+
+
+def test_every_candidate_select_scores_is_a_valid_filter(fusion):
+    # a misspelt or out-of-range candidate would stop --select after its
+    # models are trained: each must make a filter, and each but one
+    # change something
+    from dataclasses import replace
+    from wifi_place_recognition.core.filter.particles import FusionParams
+    defaults = FusionParams()
+    made = [replace(defaults, **change) for change in fusion.CANDIDATES]
+    assert sum(params == defaults for params in made) == 1
+    assert len({repr(params) for params in made}) == len(made)
