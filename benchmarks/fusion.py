@@ -55,7 +55,9 @@ how many pair/surveys meet every goal on every seed, for the three.
 The filter's defaults were chosen by leave-one-building-out on these
 runs (``--select``: candidates scored on each building, seed 0, full and
 holes; see ``doc/results.md``), never on the pair they are reported on
-alone. Table on stdout, JSON in ``benchmarks/results/fusion.json`` (with
+alone; ``mismatch_run_power`` (round 35) by a scratch harness on the same
+runs, seeds 0-2, among 0.25, 0.5 and 1, and among ``--select``'s
+candidates since round 37. Table on stdout, JSON in ``benchmarks/results/fusion.json`` (with
 one run's trajectories per building, seed 0, which
 ``benchmarks/figures.py`` draws).
 

@@ -1,4 +1,4 @@
-"""The fusion benchmark's pieces: hole exits, drift, kidnaps, what limits a pair."""
+"""The fusion benchmark's pieces: hole exits, drift, kidnaps, limits, candidates."""
 
 import math
 from types import SimpleNamespace
@@ -199,13 +199,14 @@ def test_the_hindsights_moves_are_counted_per_run(fusion):
     assert runs[0]['hindsight_moves'] == 0
 
 
-def test_every_candidate_select_scores_is_a_valid_filter(fusion):
+def test_every_candidate_select_scores_is_valid_and_distinct(fusion):
     # a misspelt or out-of-range candidate would stop --select after its
-    # models are trained: each must make a filter, and each but one
-    # change something
+    # models are trained: each must make valid parameters, and each but
+    # one change something
     from dataclasses import replace
+    from itertools import combinations
     from wifi_place_recognition.core.filter.particles import FusionParams
     defaults = FusionParams()
     made = [replace(defaults, **change) for change in fusion.CANDIDATES]
     assert sum(params == defaults for params in made) == 1
-    assert len({repr(params) for params in made}) == len(made)
+    assert all(a != b for a, b in combinations(made, 2))
