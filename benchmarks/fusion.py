@@ -52,14 +52,15 @@ some seed, and whether the same filter set at the first true pose, or
 told the holes with the mismatch, meets it on every seed; per building,
 how many pair/surveys meet every goal on every seed, for the three.
 
-The filter's defaults were chosen by leave-one-building-out on these
+The filter's defaults were checked by leave-one-building-out on these
 runs (``--select``: candidates scored on each building, seed 0, full and
-holes; see ``doc/results.md``), never on the pair they are reported on
+holes; neither building's choice beats them on the other, see
+``doc/results.md``), never chosen on the pair they are reported on
 alone; ``mismatch_run_power`` (round 35) by a scratch harness on the same
 runs, seeds 0-2, among 0.25, 0.5 and 1, and among ``--select``'s
-candidates since round 37. Table on stdout, JSON in ``benchmarks/results/fusion.json`` (with
-one run's trajectories per building, seed 0, which
-``benchmarks/figures.py`` draws).
+candidates since round 37. Table on stdout, JSON in
+``benchmarks/results/fusion.json`` (with one run's trajectories per
+building, seed 0, which ``benchmarks/figures.py`` draws).
 
     python benchmarks/fusion.py [--data ../shared/datasets/robot]
     (a folder of building folders, or one building folder, each of runs:
