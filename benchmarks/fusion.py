@@ -62,13 +62,21 @@ candidates since round 37. Table on stdout, JSON in
 ``benchmarks/results/fusion.json`` (with one run's trajectories per
 building, seed 0, which ``benchmarks/figures.py`` draws).
 
+With ``--scan-every K`` (round 38) each test run keeps only every K-th
+scan, from its first (the pairs' and the kidnaps'; the survey and its
+models as recorded): a robot that scans less often than the shared runs'
+one a second, e.g. every 2 s (``wifi_scanner_node``'s default ``period``)
+with K 2; JSON in ``fusion-every<K>.json``.
+
     python benchmarks/fusion.py [--data ../shared/datasets/robot]
     (a folder of building folders, or one building folder, each of runs:
     CSV folders or bags; a building needs two runs)
+    python benchmarks/fusion.py --scan-every 2 [--data ...]
     python benchmarks/fusion.py --select [--data ...]
 """
 
 import argparse
+import copy
 from dataclasses import replace
 from itertools import permutations
 import json
@@ -203,10 +211,21 @@ class Run:
         self.folder = folder
         fp = read_fingerprints(folder / 'scans.csv')
         self.fp = fp
+        self.localised = slice(None)   # its scans localised (:meth:`every`)
         self.stamps = fp.meta['TIMESTAMP']
         self.xy = fp.position
         self.yaw = fp.meta['YAW']
         self.odometry = read_poses(folder / 'odom.csv')
+
+    def every(self, k):
+        """Return this run with only every ``k``-th scan (from the first)."""
+        if k == 1:
+            return self
+        run = copy.copy(self)
+        run.localised = slice(None, None, k)
+        run.stamps, run.xy, run.yaw = (a[run.localised] for a in (
+            self.stamps, self.xy, self.yaw))
+        return run
 
 
 def survey_holes(xy, seed=0):
@@ -263,9 +282,10 @@ def single_scans(model, run):
     """
     Return a model's single-scan answers of a run, as the node's filter.
 
-    (positions, sigmas, coverage, mismatch over the survey's usual).
+    (positions, sigmas, coverage, mismatch over the survey's usual), of
+    the scans the run keeps (:meth:`Run.every`).
     """
-    return scan_answers(model, run.fp)[1:]
+    return tuple(a[run.localised] for a in scan_answers(model, run.fp)[1:])
 
 
 def mismatch_figures(mismatch, hole, ok, scans):
@@ -902,11 +922,24 @@ def main():
                         'with --select fusion-selection.json)')
     p.add_argument('--select', action='store_true',
                    help='score the candidate defaults per building')
+    p.add_argument('--scan-every', type=int, default=1, metavar='K',
+                   help='localise every K-th scan of each test run only '
+                        '(default 1: every scan; JSON default '
+                        'fusion-every<K>.json)')
     args = p.parse_args()
+    if args.scan_every < 1:
+        p.error(f'--scan-every must be 1 or more, not {args.scan_every}')
     if args.select:
+        if args.scan_every != 1:
+            p.error('--scan-every is not a choice of --select (the '
+                    'defaults are checked on every scan)')
         return select(args.data, args.out or
                       RESULTS / 'fusion-selection.json')
+    every = args.scan_every
+    out = args.out or RESULTS / ('fusion.json' if every == 1 else
+                                 f'fusion-every{every}.json')
     results = {'protocol': __doc__.strip(), 'seeds': SEEDS, 'goals': GOALS,
+               'scan_every': every,
                'defaults': FusionParams().to_dict() or 'the code\'s',
                'pairs': {}, 'holes': {}, 'kidnap': {},
                'drift_steadiness': {}, 'every_goal_met': {}}
@@ -923,7 +956,7 @@ def main():
                 for k, (train, test) in enumerate(permutations(runs, 2)):
                     name = f'{test.name} <- {train.name}'
                     results[key][name] = figures = pair(trained[train.name],
-                                                        test)
+                                                        test.every(every))
                     if k or holes:   # one trajectory per building
                         del figures['trajectory']
                     print(summary_line(name, 'holes' if holes else 'full',
@@ -945,6 +978,7 @@ def main():
                     train = ([r for r in runs if r not in (a, b)] or [a])[0]
                     plain, fitted = (load_model(m) for m in
                                      trained[train.name][:2])
+                    a, b = a.every(every), b.every(every)
                     result = kidnap(fitted.fusion, a, b,
                                     single_scans(plain, a),
                                     single_scans(plain, b),
@@ -981,9 +1015,9 @@ def main():
         print(f'hindsight moves, every pair, survey and seed, {name}: '
               + str(sum(r['hindsight_moves'] for key in ('pairs', 'holes')
                         for f in results[key].values() for r in f[row])))
-    with atomic_write(args.out or RESULTS / 'fusion.json', 'w') as f:
+    with atomic_write(out, 'w') as f:
         json.dump(results, f, indent=1)
-    print(f'wrote {args.out or RESULTS / "fusion.json"}')
+    print(f'wrote {out}')
 
 
 if __name__ == '__main__':

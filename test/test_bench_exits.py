@@ -210,3 +210,32 @@ def test_every_candidate_select_scores_is_valid_and_distinct(fusion):
     made = [replace(defaults, **change) for change in fusion.CANDIDATES]
     assert sum(params == defaults for params in made) == 1
     assert all(a != b for a, b in combinations(made, 2))
+
+
+def test_scan_every_thins_the_test_runs_scans_and_their_answers(
+        fusion, tmp_path, monkeypatch):
+    # a run of 9 scans a second apart; every 2nd keeps scans 0, 2, 4, 6, 8
+    # and their answers, the odometry whole (a robot scanning every 2 s)
+    aps = ('00:00:00:00:00:01', '00:00:00:00:00:02')
+    rows = [f'{100 + i}.5,{i},0,0,-{60 + i},100,0,0' for i in range(9)]
+    (tmp_path / 'scans.csv').write_text(
+        'TIMESTAMP,X,Y,YAW,' + ','.join(aps) + ',FLOOR,BUILDINGID\n' +
+        '\n'.join(rows) + '\n')
+    (tmp_path / 'odom.csv').write_text('TIMESTAMP,X,Y,YAW\n' + ''.join(
+        f'{100 + i / 10},{i / 10},0,0\n' for i in range(100)))
+    run = fusion.Run(tmp_path)
+    assert run.every(1) is run
+    thin = run.every(2)
+    assert thin.stamps.tolist() == [100.5, 102.5, 104.5, 106.5, 108.5]
+    assert thin.xy[:, 0].tolist() == [0, 2, 4, 6, 8]
+    assert len(thin.yaw) == 5 and len(thin.odometry) == 100
+    assert len(run.stamps) == 9     # the run itself whole (the survey)
+
+    def answers(model, fp):         # a scan's answer: its first reading
+        n = len(fp.meta['TIMESTAMP'])
+        return (None, np.column_stack([fp.rssi[:, 0], np.zeros(n)]),
+                np.ones(n), np.ones(n), np.ones(n))
+    monkeypatch.setattr(fusion, 'scan_answers', answers)
+    xy = fusion.single_scans(None, thin)[0]
+    assert xy[:, 0].tolist() == [-60, -62, -64, -66, -68]
+    assert all(len(a) == 5 for a in fusion.single_scans(None, thin))
