@@ -209,22 +209,22 @@ class Run:
     def __init__(self, folder):
         self.name = folder.name
         self.folder = folder
-        fp = read_fingerprints(folder / 'scans.csv')
+        self._scans(read_fingerprints(folder / 'scans.csv'))
+        self.odometry = read_poses(folder / 'odom.csv')
+
+    def _scans(self, fp):
+        """Keep ``fp``'s scans, and their stamps, truth and yaw."""
         self.fp = fp
-        self.localised = slice(None)   # its scans localised (:meth:`every`)
         self.stamps = fp.meta['TIMESTAMP']
         self.xy = fp.position
         self.yaw = fp.meta['YAW']
-        self.odometry = read_poses(folder / 'odom.csv')
 
     def every(self, k):
         """Return this run with only every ``k``-th scan (from the first)."""
         if k == 1:
             return self
         run = copy.copy(self)
-        run.localised = slice(None, None, k)
-        run.stamps, run.xy, run.yaw = (a[run.localised] for a in (
-            self.stamps, self.xy, self.yaw))
+        run._scans(self.fp.subset(slice(None, None, k)))
         return run
 
 
@@ -282,10 +282,9 @@ def single_scans(model, run):
     """
     Return a model's single-scan answers of a run, as the node's filter.
 
-    (positions, sigmas, coverage, mismatch over the survey's usual), of
-    the scans the run keeps (:meth:`Run.every`).
+    (positions, sigmas, coverage, mismatch over the survey's usual).
     """
-    return tuple(a[run.localised] for a in scan_answers(model, run.fp)[1:])
+    return scan_answers(model, run.fp)[1:]
 
 
 def mismatch_figures(mismatch, hole, ok, scans):
